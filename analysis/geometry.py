@@ -1,0 +1,84 @@
+"""Signed distances to the scene's shapes (validation of contact points, collision checks)."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+from analysis.kinematics import BodyRef, HandKinematics, segment_distance
+from analysis.rotations import quat_wxyz_to_matrix, rotz
+
+if TYPE_CHECKING:
+    from analysis.scene import Scene
+
+Array = NDArray[np.float64]
+
+
+def object_rotation(scene: Scene) -> Array:
+    """World rotation ``(3, 3)`` of the object frame."""
+    pose = scene.object.pose
+    if scene.dim == 2:
+        return rotz(pose.angle or 0.0)
+    return quat_wxyz_to_matrix(pose.quat_wxyz or [1.0, 0.0, 0.0, 0.0])
+
+
+def object_origin(scene: Scene) -> Array:
+    """``p_o``: where the external wrench acts, ``(d,)``."""
+    return np.asarray(scene.object.pose.position, dtype=float)
+
+
+def shape_signed_distance(shape: object, p_local: Array, dim: int) -> float | None:
+    """Signed distance (negative inside) of a point given in the shape's frame.
+
+    ``None`` for shapes whose distance is not computed (meshes).
+    """
+    from analysis.scene import Box, Cylinder, Disk, Polygon, Segment, Sphere
+
+    p = np.asarray(p_local, dtype=float)[:dim]
+    if isinstance(shape, Disk | Sphere):
+        return float(np.linalg.norm(p) - shape.radius)
+    if isinstance(shape, Box):
+        c = np.asarray(shape.position if shape.position is not None else np.zeros(dim), dtype=float)
+        h = np.asarray(shape.size, dtype=float) / 2.0
+        q = np.abs(p - c) - h
+        outside = float(np.linalg.norm(np.maximum(q, 0.0)))
+        inside = float(min(np.max(q), 0.0))
+        return outside + inside
+    if isinstance(shape, Polygon):
+        V = np.asarray(shape.vertices, dtype=float)
+        worst = -np.inf
+        for i in range(len(V)):
+            a, b = V[i], V[(i + 1) % len(V)]
+            e = b - a
+            n_out = np.array([e[1], -e[0]]) / np.linalg.norm(e)  # outward for CCW polygons
+            worst = max(worst, float(n_out @ (p - a)))
+        if worst > 0:
+            return min(segment_distance(p, V[i], V[(i + 1) % len(V)]) for i in range(len(V)))
+        return worst
+    if isinstance(shape, Cylinder):
+        r = float(np.linalg.norm(p[:2])) - shape.radius
+        z = abs(float(p[2])) - shape.height / 2.0
+        return float(np.linalg.norm(np.maximum([r, z], 0.0)) + min(max(r, z), 0.0))
+    if isinstance(shape, Segment):
+        a, b = (np.asarray(x, dtype=float) for x in shape.points)
+        return segment_distance(p, a, b)
+    return None
+
+
+def object_signed_distance(scene: Scene, p: Array) -> float | None:
+    """Signed distance of the world point ``p`` to the object at its scene pose."""
+    R = object_rotation(scene)[: scene.dim, : scene.dim]
+    local = R.T @ (np.asarray(p, dtype=float) - object_origin(scene))
+    return shape_signed_distance(scene.object.shape, local, scene.dim)
+
+
+def body_surface_distance(scene: Scene, hand: HandKinematics, ref: BodyRef, p: Array) -> float | None:
+    """Distance of ``p`` to the surface of a finger link (its axis inflated by the link radius)
+    or of a fixed body (given in world coordinates)."""
+    if ref.finger is None:
+        body = next(b for b in scene.fixed_bodies if b.name == ref.name)
+        return shape_signed_distance(body.shape, np.asarray(p, dtype=float), scene.dim)
+    a, b = hand.body_segment(ref, hand.q0)
+    return segment_distance(np.asarray(p, dtype=float), a, b) - hand.body_radius(ref)

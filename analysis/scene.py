@@ -1,0 +1,423 @@
+"""Scene format: pydantic models, loading (JSON/YAML) and geometric validation.
+
+A scene is the input of every analysis: the object, the fixed bodies (palm, table), the
+fingers (serial chains or URDF), the contacts (order = letters of a combination string) and
+the external wrench. Every check that can fail names the field it concerns through pydantic's
+error location, e.g. ``contacts.2.normal``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic_core import InitErrorDetails, PydanticCustomError
+
+from analysis.exceptions import SceneError
+
+#: Maximum number of contacts a scene may declare (3**L combinations are enumerated).
+MAX_CONTACTS = 16
+#: Absolute tolerance (scene length units) for "a point lies on a surface".
+GEOMETRY_TOL = 1e-4
+#: Tolerance on the norm of unit vectors (normals, quaternions, axes).
+UNIT_TOL = 1e-4
+
+
+def _finite(values: list[float]) -> list[float]:
+    for v in values:
+        if not math.isfinite(v):
+            raise ValueError("must contain finite numbers only (no NaN or inf)")
+    return values
+
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+Vec = Annotated[list[FiniteFloat], Field(min_length=1)]
+Vec2 = Annotated[list[FiniteFloat], Field(min_length=2, max_length=2)]
+Vec3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
+Quat = Annotated[list[FiniteFloat], Field(min_length=4, max_length=4)]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class Pose(_Model):
+    """Object pose: ``position`` and ``angle`` (2-D) or ``quat_wxyz`` (3-D)."""
+
+    position: Vec
+    angle: FiniteFloat | None = None
+    quat_wxyz: Quat | None = None
+
+    @field_validator("quat_wxyz")
+    @classmethod
+    def _unit_quat(cls, q: list[float] | None) -> list[float] | None:
+        if q is not None and abs(np.linalg.norm(q) - 1.0) > UNIT_TOL:
+            raise ValueError(f"quaternion must have unit norm (norm {np.linalg.norm(q):.6g})")
+        return q
+
+
+class Disk(_Model):
+    type: Literal["disk"]
+    radius: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
+class Sphere(_Model):
+    type: Literal["sphere"]
+    radius: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
+class Box(_Model):
+    """Axis-aligned box (in its own frame) of full extents ``size``, centred at ``position``."""
+
+    type: Literal["box"]
+    size: Vec
+    position: Vec | None = None
+
+    @field_validator("size")
+    @classmethod
+    def _positive(cls, s: list[float]) -> list[float]:
+        if any(v <= 0 for v in s):
+            raise ValueError("box extents must be positive")
+        return s
+
+
+class Polygon(_Model):
+    """Convex polygon (2-D), vertices counter-clockwise in the body frame."""
+
+    type: Literal["polygon"]
+    vertices: Annotated[list[Vec2], Field(min_length=3)]
+
+
+class Cylinder(_Model):
+    """Cylinder about the body z axis (3-D)."""
+
+    type: Literal["cylinder"]
+    radius: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    height: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
+class Mesh(_Model):
+    type: Literal["mesh"]
+    file: str
+
+
+class Segment(_Model):
+    """A segment from ``points[0]`` to ``points[1]`` (fixed bodies only)."""
+
+    type: Literal["segment"]
+    points: Annotated[list[Vec], Field(min_length=2, max_length=2)]
+
+
+ObjectShape = Annotated[Disk | Sphere | Box | Polygon | Cylinder | Mesh, Field(discriminator="type")]
+FixedShape = Annotated[Segment | Box | Disk | Sphere | Polygon, Field(discriminator="type")]
+
+
+class SceneObject(_Model):
+    pose: Pose
+    shape: ObjectShape
+
+
+class FixedBody(_Model):
+    name: Annotated[str, Field(min_length=1, pattern=r"^[^/]+$")]
+    shape: FixedShape
+
+
+class Base2D(_Model):
+    position: Vec2
+    angle: FiniteFloat = 0.0
+
+
+class Base3D(_Model):
+    position: Vec3
+    quat_wxyz: Quat = [1.0, 0.0, 0.0, 0.0]
+
+    @field_validator("quat_wxyz")
+    @classmethod
+    def _unit_quat(cls, q: list[float]) -> list[float]:
+        if abs(np.linalg.norm(q) - 1.0) > UNIT_TOL:
+            raise ValueError(f"quaternion must have unit norm (norm {np.linalg.norm(q):.6g})")
+        return q
+
+
+class Link2D(_Model):
+    length: Annotated[float, Field(gt=0, allow_inf_nan=False)]
+    radius: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
+
+
+class Joint3D(_Model):
+    """Revolute joint: ``origin`` in the previous joint's frame, rotation about ``axis``."""
+
+    axis: Vec3
+    origin: Vec3
+    radius: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
+
+    @field_validator("axis")
+    @classmethod
+    def _unit_axis(cls, a: list[float]) -> list[float]:
+        if abs(np.linalg.norm(a) - 1.0) > UNIT_TOL:
+            raise ValueError(f"joint axis must be a unit vector (norm {np.linalg.norm(a):.6g})")
+        return a
+
+
+class Finger2D(_Model):
+    """Planar serial chain: link k turns by ``q[k]`` relative to link k-1."""
+
+    name: Annotated[str, Field(min_length=1, pattern=r"^[^/]+$")]
+    base: Base2D
+    links: Annotated[list[Link2D], Field(min_length=1)]
+    q: list[FiniteFloat]
+
+    @model_validator(mode="after")
+    def _q_length(self) -> Finger2D:
+        if len(self.q) != len(self.links):
+            _raise(("q",), f"has {len(self.q)} values but the finger has {len(self.links)} links", self.q)
+        return self
+
+
+class Finger3D(_Model):
+    """Spatial serial chain of revolute joints ending at ``tip`` (in the last joint's frame)."""
+
+    name: Annotated[str, Field(min_length=1, pattern=r"^[^/]+$")]
+    base: Base3D
+    joints: Annotated[list[Joint3D], Field(min_length=1)]
+    tip: Vec3
+    q: list[FiniteFloat]
+
+    @model_validator(mode="after")
+    def _q_length(self) -> Finger3D:
+        if len(self.q) != len(self.joints):
+            _raise(("q",), f"has {len(self.q)} values but the finger has {len(self.joints)} joints", self.q)
+        return self
+
+
+class UrdfSpec(_Model):
+    file: str
+    root_link: str
+    tip_link: str
+    package_dirs: list[str] = []
+
+
+class FingerURDF(_Model):
+    """A serial chain read from a URDF (root link to tip link), loaded with pinocchio.
+
+    Contacts on it name a link: ``"<finger>/<link name>"``.
+    """
+
+    name: Annotated[str, Field(min_length=1, pattern=r"^[^/]+$")]
+    base: Base3D
+    urdf: UrdfSpec
+    q: list[FiniteFloat]
+    link_radius: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
+
+
+Finger = Finger2D | Finger3D | FingerURDF
+
+
+class Contact(_Model):
+    body: Annotated[str, Field(min_length=1)]
+    point: Vec
+    normal: Vec
+    mu: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+
+
+class Scene(_Model):
+    """A hand holding an object: the input of the closure analysis."""
+
+    name: str = "scene"
+    description: str = ""
+    dim: Literal[2, 3]
+    object: SceneObject
+    external_wrench: Vec
+    fixed_bodies: list[FixedBody] = []
+    fingers: list[Finger2D | Finger3D | FingerURDF] = []
+    contacts: Annotated[list[Contact], Field(min_length=1)]
+    joint_torque_limits: list[Annotated[float, Field(gt=0, allow_inf_nan=False)]] | None = None
+    friction_cone_sides: Annotated[int, Field(ge=3, le=64)] = 16
+
+    @property
+    def D(self) -> int:
+        """Object coordinates: 3 in 2-D, 6 in 3-D."""
+        return 3 if self.dim == 2 else 6
+
+    @property
+    def d(self) -> int:
+        """Force components per contact: 2 in 2-D, 3 in 3-D."""
+        return self.dim
+
+    @model_validator(mode="after")
+    def _check_geometry(self) -> Scene:
+        errors: list[InitErrorDetails] = []
+
+        def err(loc: tuple[str | int, ...], msg: str, value: Any) -> None:
+            errors.append(
+                InitErrorDetails(type=PydanticCustomError("scene", msg), loc=loc, input=value)
+            )
+
+        _check_shapes_and_lengths(self, err)
+        if errors:
+            raise ValidationError.from_exception_data("Scene", errors)
+        _check_contacts(self, err)
+        if errors:
+            raise ValidationError.from_exception_data("Scene", errors)
+        return self
+
+
+def _raise(loc: tuple[str | int, ...], msg: str, value: Any) -> None:
+    raise ValidationError.from_exception_data(
+        "Scene", [InitErrorDetails(type=PydanticCustomError("scene", msg), loc=loc, input=value)]
+    )
+
+
+def _check_shapes_and_lengths(scene: Scene, err: Any) -> None:
+    dim, D = scene.dim, scene.D
+    pose = scene.object.pose
+    if len(pose.position) != dim:
+        err(("object", "pose", "position"), f"must have {dim} components for dim={dim}", pose.position)
+    if dim == 2 and pose.angle is None:
+        err(("object", "pose", "angle"), "is required for dim=2", None)
+    if dim == 3 and pose.quat_wxyz is None:
+        err(("object", "pose", "quat_wxyz"), "is required for dim=3", None)
+    shape = scene.object.shape
+    if dim == 2 and shape.type in ("sphere", "cylinder"):
+        err(("object", "shape", "type"), f"'{shape.type}' is a 3-D shape; use disk/box/polygon", shape.type)
+    if dim == 3 and shape.type in ("disk", "polygon"):
+        err(("object", "shape", "type"), f"'{shape.type}' is a 2-D shape; use sphere/box/cylinder", shape.type)
+    if isinstance(shape, Box) and len(shape.size) != dim:
+        err(("object", "shape", "size"), f"must have {dim} components for dim={dim}", shape.size)
+    if len(scene.external_wrench) != D:
+        err(("external_wrench",), f"must have {D} components for dim={dim} (force and moment)",
+            scene.external_wrench)
+    names: set[str] = set()
+    for i, fb in enumerate(scene.fixed_bodies):
+        if fb.name in names:
+            err(("fixed_bodies", i, "name"), f"duplicate body name '{fb.name}'", fb.name)
+        names.add(fb.name)
+        s = fb.shape
+        if isinstance(s, Segment):
+            for j, p in enumerate(s.points):
+                if len(p) != dim:
+                    err(("fixed_bodies", i, "shape", "points", j), f"must have {dim} components", p)
+        if isinstance(s, Box):
+            if len(s.size) != dim:
+                err(("fixed_bodies", i, "shape", "size"), f"must have {dim} components", s.size)
+            if s.position is not None and len(s.position) != dim:
+                err(("fixed_bodies", i, "shape", "position"), f"must have {dim} components", s.position)
+    for i, f in enumerate(scene.fingers):
+        if f.name in names:
+            err(("fingers", i, "name"), f"duplicate body name '{f.name}'", f.name)
+        names.add(f.name)
+        if dim == 2 and not isinstance(f, Finger2D):
+            err(("fingers", i), "a 2-D scene needs planar fingers (base, links, q)", f.name)
+        if dim == 3 and isinstance(f, Finger2D):
+            err(("fingers", i), "a 3-D scene needs spatial fingers (joints, tip, q) or urdf", f.name)
+    for i, c in enumerate(scene.contacts):
+        if len(c.point) != dim:
+            err(("contacts", i, "point"), f"must have {dim} components for dim={dim}", c.point)
+        if len(c.normal) != dim:
+            err(("contacts", i, "normal"), f"must have {dim} components for dim={dim}", c.normal)
+    if len(scene.contacts) > MAX_CONTACTS:
+        err(("contacts",), f"has {len(scene.contacts)} contacts; the limit is {MAX_CONTACTS}",
+            len(scene.contacts))
+    if scene.joint_torque_limits is not None:
+        from analysis.kinematics import joint_count
+
+        M = joint_count(scene)
+        if len(scene.joint_torque_limits) != M:
+            err(("joint_torque_limits",), f"must have one entry per joint ({M})", scene.joint_torque_limits)
+
+
+def _check_contacts(scene: Scene, err: Any) -> None:
+    from analysis.geometry import body_surface_distance, object_signed_distance
+    from analysis.kinematics import HandKinematics
+
+    try:
+        hand = HandKinematics.from_scene(scene)
+    except SceneError as e:
+        err(tuple(e.loc), e.reason, None)
+        return
+    for i, c in enumerate(scene.contacts):
+        n = np.asarray(c.normal, dtype=float)
+        p = np.asarray(c.point, dtype=float)
+        norm = float(np.linalg.norm(n))
+        if abs(norm - 1.0) > UNIT_TOL:
+            err(("contacts", i, "normal"), f"must be a unit vector (norm {norm:.6g})", c.normal)
+            continue
+        ref = hand.resolve_body(c.body)
+        if ref is None:
+            err(("contacts", i, "body"), f"unknown body '{c.body}' (known: {', '.join(hand.body_names())})",
+                c.body)
+            continue
+        dist = body_surface_distance(scene, hand, ref, p)
+        if dist is not None and abs(dist) > GEOMETRY_TOL:
+            err(("contacts", i, "point"), f"is {abs(dist):.4g} away from the surface of body '{c.body}'",
+                c.point)
+            continue
+        sd = object_signed_distance(scene, p)
+        if sd is not None and abs(sd) > GEOMETRY_TOL:
+            err(("contacts", i, "point"), f"is {abs(sd):.4g} away from the object's surface", c.point)
+            continue
+        inside = object_signed_distance(scene, p + 1e-3 * n)
+        if inside is not None and inside >= 0.0:
+            err(("contacts", i, "normal"), "must point into the object (it points outward)", c.normal)
+
+
+# --------------------------------------------------------------------------------------------
+# Loading
+
+
+def _format_loc(loc: tuple[str | int, ...]) -> str:
+    return ".".join(str(part) for part in loc) if loc else "scene"
+
+
+def scene_from_dict(data: Any) -> Scene:
+    """Validate a parsed scene; raise :class:`SceneError` naming the first bad field."""
+    try:
+        return Scene.model_validate(data)
+    except ValidationError as e:
+        first = e.errors()[0]
+        loc = tuple(first["loc"])
+        raise SceneError(loc, first["msg"], errors=e.errors()) from None
+
+
+def parse_scene_text(text: str, suffix: str = ".json") -> Scene:
+    try:
+        data = yaml.safe_load(text) if suffix in (".yaml", ".yml") else json.loads(text)
+    except (json.JSONDecodeError, yaml.YAMLError) as e:
+        raise SceneError((), f"cannot parse {suffix.lstrip('.').upper()}: {e}") from None
+    return scene_from_dict(data)
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Load a scene from a ``.json``, ``.yaml`` or ``.yml`` file."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as e:
+        raise SceneError((), f"cannot read {path}: {e.strerror}") from None
+    return parse_scene_text(text, path.suffix.lower())
+
+
+def scene_json_schema() -> dict[str, Any]:
+    """The JSON Schema of the scene format (``ctp schema``)."""
+    return Scene.model_json_schema()
+
+
+__all__ = [
+    "Contact",
+    "FixedBody",
+    "Finger2D",
+    "Finger3D",
+    "FingerURDF",
+    "Scene",
+    "SceneError",
+    "_format_loc",
+    "load_scene",
+    "parse_scene_text",
+    "scene_from_dict",
+    "scene_json_schema",
+]
