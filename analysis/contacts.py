@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from analysis._types import Array
 from analysis.exceptions import CombinationError
 from analysis.geometry import object_origin
 from analysis.kinematics import BodyRef, HandKinematics
@@ -22,7 +23,6 @@ from analysis.kinematics import BodyRef, HandKinematics
 if TYPE_CHECKING:
     from analysis.scene import Scene
 
-Array = NDArray[np.float64]
 
 STATES = "FNSD"
 
@@ -116,7 +116,7 @@ class GraspSystem:
         """Rows of ``A`` of contact ``i``: ``(d, M + D)``."""
         return np.hstack([self.J_blocks[i], -self.G_blocks[i].T])
 
-    def frictional(self) -> Array:
+    def frictional(self) -> NDArray[np.bool_]:
         return self.mu > 0.0
 
 

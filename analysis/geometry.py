@@ -5,15 +5,14 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 import numpy as np
-from numpy.typing import NDArray
 
+from analysis._types import Array
 from analysis.kinematics import BodyRef, HandKinematics, segment_distance
 from analysis.rotations import quat_wxyz_to_matrix, rotz
 
 if TYPE_CHECKING:
     from analysis.scene import Scene
 
-Array = NDArray[np.float64]
 
 
 def object_rotation(scene: Scene) -> Array:

@@ -15,15 +15,14 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
-from numpy.typing import NDArray
 
+from analysis._types import Array
 from analysis.exceptions import SceneError
 from analysis.rotations import axis_angle_matrix, quat_wxyz_to_matrix, rotz
 
 if TYPE_CHECKING:
     from analysis.scene import Scene
 
-Array = NDArray[np.float64]
 
 
 class FingerModel(Protocol):
@@ -88,7 +87,7 @@ class SerialChain:
         return [f"{self.name}/{k}" for k in range(self.n_joints)]
 
     def body_index(self, label: str) -> int | None:
-        if label.isdigit() and int(label) < self.n_joints:
+        if label.isascii() and label.isdigit() and int(label) < self.n_joints:
             return int(label)
         return None
 

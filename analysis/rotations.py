@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
 
-Array = NDArray[np.float64]
+from analysis._types import Array
 
 
 def quat_wxyz_to_matrix(q: list[float] | Array) -> Array:
@@ -66,15 +65,21 @@ def rotvec_to_matrix(w: Array) -> Array:
 
 def matrix_to_rotvec(R: Array) -> Array:
     """Rotation vector (axis * angle, angle in [0, pi]) of a rotation matrix."""
-    c = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
-    th = float(np.arccos(c))
-    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-    if th < 1e-9:
-        return 0.5 * v
-    if np.pi - th < 1e-6:
-        # axis from the symmetric part
-        A = (R + np.eye(3)) / 2.0
-        i = int(np.argmax(np.diag(A)))
-        ax = A[:, i] / np.sqrt(max(A[i, i], 1e-300))
-        return ax * th
-    return th / (2.0 * np.sin(th)) * v
+    v = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])  # 2 sin(th) axis
+    c = (float(np.trace(R)) - 1.0) / 2.0
+    s = float(np.linalg.norm(v)) / 2.0
+    th = float(np.arctan2(s, c))  # well conditioned for every angle, unlike arccos(c) near pi
+    if s < 1e-300:
+        return 0.5 * v if c > 0 else _half_turn_axis(R, c, v) * th
+    if c > -0.5:  # th < 2 pi / 3: the axis is v / |v|
+        return th / (2.0 * s) * v
+    # near pi, v is small: axis from the symmetric part (R + R^T) / 2 = c I + (1 - c) a a^T,
+    # its sign from v
+    return _half_turn_axis(R, c, v) * th
+
+
+def _half_turn_axis(R: Array, c: float, v: Array) -> Array:
+    A = ((R + R.T) / 2.0 - c * np.eye(3)) / (1.0 - c)
+    i = int(np.argmax(np.diag(A)))
+    ax = A[:, i] / np.sqrt(max(A[i, i], 1e-300))
+    return -ax if ax @ v < 0 else ax

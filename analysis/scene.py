@@ -15,7 +15,16 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Discriminator,
+    Field,
+    Tag,
+    ValidationError,
+    field_validator,
+    model_validator,
+)
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
 from analysis.exceptions import SceneError
@@ -91,6 +100,21 @@ class Polygon(_Model):
 
     type: Literal["polygon"]
     vertices: Annotated[list[Vec2], Field(min_length=3)]
+
+    @field_validator("vertices")
+    @classmethod
+    def _convex_ccw(cls, v: list[list[float]]) -> list[list[float]]:
+        # every turn must be to the left: the signed distances assume a convex CCW polygon
+        def cross(a: Any, b: Any) -> Any:
+            return a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+
+        V = np.asarray(v, dtype=float)
+        e = np.roll(V, -1, axis=0) - V  # edge i: vertex i -> i+1
+        turns = cross(e, np.roll(e, -1, axis=0))
+        area2 = float(np.sum(cross(V, np.roll(V, -1, axis=0))))
+        if np.any(turns < 0.0) or area2 <= 0.0 or np.any(np.linalg.norm(e, axis=1) == 0.0):
+            raise ValueError("vertices must form a convex polygon in counter-clockwise order")
+        return v
 
 
 class Cylinder(_Model):
@@ -215,7 +239,36 @@ class FingerURDF(_Model):
     link_radius: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
 
 
-Finger = Finger2D | Finger3D | FingerURDF
+def _finger_kind(value: Any) -> str | None:
+    """Which finger model a (raw or validated) finger is, from the keys it has, so that an error
+    in a finger is reported against that model only (not against every member of the union)."""
+    if isinstance(value, BaseModel):
+        return type(value).__name__
+    if isinstance(value, dict):
+        if "urdf" in value:
+            return "FingerURDF"
+        if "joints" in value:
+            return "Finger3D"
+        if "links" in value:
+            return "Finger2D"
+    return None
+
+
+Finger = Annotated[
+    Annotated[Finger2D, Tag("Finger2D")]
+    | Annotated[Finger3D, Tag("Finger3D")]
+    | Annotated[FingerURDF, Tag("FingerURDF")],
+    Discriminator(
+        _finger_kind,
+        custom_error_type="finger_kind",
+        custom_error_message="a finger needs 'links' (planar), 'joints' (spatial) or 'urdf'",
+    ),
+]
+#: Union tags that pydantic inserts into error locations; ``scene_from_dict`` drops them.
+_UNION_TAGS = {
+    *("Finger2D", "Finger3D", "FingerURDF"),
+    *("disk", "sphere", "box", "polygon", "cylinder", "mesh", "segment"),
+}
 
 
 class Contact(_Model):
@@ -234,7 +287,7 @@ class Scene(_Model):
     object: SceneObject
     external_wrench: Vec
     fixed_bodies: list[FixedBody] = []
-    fingers: list[Finger2D | Finger3D | FingerURDF] = []
+    fingers: list[Finger] = []
     contacts: Annotated[list[Contact], Field(min_length=1)]
     joint_torque_limits: list[Annotated[float, Field(gt=0, allow_inf_nan=False)]] | None = None
     friction_cone_sides: Annotated[int, Field(ge=3, le=64)] = 16
@@ -286,7 +339,8 @@ def _check_shapes_and_lengths(scene: Scene, err: Any) -> None:
     if dim == 2 and shape.type in ("sphere", "cylinder"):
         err(("object", "shape", "type"), f"'{shape.type}' is a 3-D shape; use disk/box/polygon", shape.type)
     if dim == 3 and shape.type in ("disk", "polygon"):
-        err(("object", "shape", "type"), f"'{shape.type}' is a 2-D shape; use sphere/box/cylinder", shape.type)
+        err(("object", "shape", "type"), f"'{shape.type}' is a 2-D shape; use sphere/box/cylinder",
+            shape.type)
     if isinstance(shape, Box) and len(shape.size) != dim:
         err(("object", "shape", "size"), f"must have {dim} components for dim={dim}", shape.size)
     if len(scene.external_wrench) != D:
@@ -374,14 +428,27 @@ def _format_loc(loc: tuple[str | int, ...]) -> str:
     return ".".join(str(part) for part in loc) if loc else "scene"
 
 
+def _clean_loc(loc: tuple[str | int, ...]) -> tuple[str | int, ...]:
+    """Drop the union tags pydantic puts after ``...shape`` and ``fingers.<i>`` in a location."""
+    out: list[str | int] = []
+    for i, part in enumerate(loc):
+        after_shape = i >= 1 and loc[i - 1] == "shape"
+        after_finger = i >= 2 and loc[i - 2] == "fingers" and isinstance(loc[i - 1], int)
+        if part in _UNION_TAGS and (after_shape or after_finger):
+            continue
+        out.append(part)
+    return tuple(out)
+
+
 def scene_from_dict(data: Any) -> Scene:
     """Validate a parsed scene; raise :class:`SceneError` naming the first bad field."""
     try:
         return Scene.model_validate(data)
     except ValidationError as e:
         first = e.errors()[0]
-        loc = tuple(first["loc"])
-        raise SceneError(loc, first["msg"], errors=e.errors()) from None
+        loc = _clean_loc(tuple(first["loc"]))
+        errors = [{**err, "loc": _clean_loc(tuple(err["loc"]))} for err in e.errors()]
+        raise SceneError(loc, first["msg"], errors=errors) from None
 
 
 def parse_scene_text(text: str, suffix: str = ".json") -> Scene:
@@ -409,10 +476,10 @@ def scene_json_schema() -> dict[str, Any]:
 
 __all__ = [
     "Contact",
-    "FixedBody",
     "Finger2D",
     "Finger3D",
     "FingerURDF",
+    "FixedBody",
     "Scene",
     "SceneError",
     "_format_loc",
