@@ -1,0 +1,222 @@
+"""Full closure analysis of one contact-state combination (paper section IV) as one object.
+
+``analyze_combination`` chains the steps: selection (3) -> motion space (7, 19) -> statics
+(8-10) -> friction set (16) -> stationary grasp (18) -> DAFC (22) -> DPFC (28) -> torque set
+(29-32) for a direction -> regrasp cone (33). Results are JSON-ready via ``to_json``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from analysis._types import Array
+from analysis.contacts import GraspSystem, Selection, selection
+from analysis.dafc import SEMANTICS, DAFCOracle, DAFCSet, DirectionTest, dafc_nonempty, dafc_set
+from analysis.dpfc import DPFC, dpfc
+from analysis.exceptions import CTPError, NoStationaryGrasp
+from analysis.friction import FrictionSet, friction_set
+from analysis.motion import MotionSpace, motion_space
+from analysis.regrasp import RegraspCone, regrasp_cone
+from analysis.statics import Statics, statics
+from analysis.stationary import StationaryGrasp, stationary_grasp
+from analysis.torques import FrictionUncertainty, TorqueSet, friction_uncertainty, torque_set
+
+
+@dataclass(frozen=True)
+class CombinationParts:
+    """The matrices of one combination (shared by the summary and the full report)."""
+
+    system: GraspSystem
+    sel: Selection
+    ms: MotionSpace
+    st: Statics
+    fs: FrictionSet
+
+    @classmethod
+    def build(cls, system: GraspSystem, combination: str) -> CombinationParts:
+        sel = selection(system, combination)
+        return cls(system, sel, motion_space(system, sel), statics(system, sel), friction_set(system, sel))
+
+    def oracle(self) -> DAFCOracle:
+        return DAFCOracle(self.system, self.sel, self.ms, self.st, self.fs)
+
+
+@dataclass(frozen=True)
+class CombinationSummary:
+    """One row of the enumeration table."""
+
+    combination: str
+    feasible: bool
+    reason: str
+    a: int  # dim of the motion space (7)
+    a_bar: int  # dim of the object-motion space (19)
+    dim_dafc: int
+    dim_dpfc: int  # p = rank(G_c Gamma): dimension of the span of DPFC directions
+    exact: bool
+    example_direction: Array | None  # (D,) a member of DAFC
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "combination": self.combination,
+            "feasible": self.feasible,
+            "reason": self.reason,
+            "a": self.a,
+            "a_bar": self.a_bar,
+            "dim_dafc": self.dim_dafc,
+            "dim_dpfc": self.dim_dpfc,
+            "exact": self.exact,
+            "example_direction": None if self.example_direction is None else _list(self.example_direction),
+        }
+
+
+def summarize(parts: CombinationParts, stationary_known: bool | None = None) -> CombinationSummary:
+    """Feasibility (stationary grasp exists and DAFC is non-empty), DAFC dimension, an example."""
+    sy, sel, ms, st, fs = parts.system, parts.sel, parts.ms, parts.st, parts.fs
+    c = sel.combination
+    p = st.p
+    if ms.a_bar == 0:
+        return CombinationSummary(c, False, "object cannot move (a~ = 0)", ms.a, 0, 0, p, True, None)
+    if stationary_known is None:
+        from analysis.stationary import min_total_normal
+
+        stationary_known = min_total_normal(sy, st, fs) is not None
+    if not stationary_known:
+        return CombinationSummary(c, False, "no stationary grasp (18)", ms.a, ms.a_bar, 0, p, True, None)
+    best, dim, exact = dafc_nonempty(parts.oracle())
+    if best is None:
+        return CombinationSummary(c, False, "DAFC is empty", ms.a, ms.a_bar, 0, p, exact, None)
+    return CombinationSummary(c, True, "feasible", ms.a, ms.a_bar, dim, p, exact, best.direction)
+
+
+@dataclass(frozen=True)
+class CombinationReport:
+    """Everything section IV says about one combination."""
+
+    summary: CombinationSummary
+    parts: CombinationParts
+    stationary: StationaryGrasp | None
+    stationary_min_grip: StationaryGrasp | None
+    dafc: DAFCSet | None
+    dpfc: DPFC | None
+    torque: TorqueSet | None
+    torque_error: str | None
+    direction_test: DirectionTest | None
+    uncertainty: FrictionUncertainty | None
+    regrasp: RegraspCone | None
+
+    def to_json(self) -> dict[str, Any]:
+        ms, st = self.parts.ms, self.parts.st
+        out: dict[str, Any] = self.summary.to_json()
+        out["semantics"] = SEMANTICS
+        out["motion_space"] = {
+            "a": ms.a,
+            "a_bar": ms.a_bar,
+            "redundancy": ms.n_redundant,
+            "Lambda_r_tilde": _list(ms.Lambda_r_t),
+        }
+        out["statics"] = {"p": st.p, "Xi": _list(st.Xi), "D": _list(st.D)}
+        if self.stationary is not None:
+            out["stationary"] = _grasp_json(self.stationary)
+        if self.stationary_min_grip is not None:
+            out["stationary_min_grip"] = _grasp_json(self.stationary_min_grip)
+        if self.dafc is not None:
+            out["dafc"] = {
+                "exact": self.dafc.exact,
+                "dim": self.dafc.dim,
+                "directions": _list(self.dafc.directions),
+                "member": [bool(m) for m in self.dafc.member],
+                "work": [None if not np.isfinite(w) else float(w) for w in self.dafc.work],
+                "allowable_cone": {
+                    "rays": _list(self.dafc.allowable.rays),
+                    "lines": _list(self.dafc.allowable.lines),
+                },
+            }
+        if self.dpfc is not None:
+            out["dpfc"] = {"dim": self.dpfc.dim, "vertices": _list(self.dpfc.vertices),
+                           "rays": _list(self.dpfc.generators.rays),
+                           "lines": _list(self.dpfc.generators.lines)}
+        if self.direction_test is not None:
+            t = self.direction_test
+            out["direction_test"] = {"direction": _list(t.direction), "member": t.member, "reason": t.reason,
+                                     "work": None if not np.isfinite(t.work) else float(t.work)}
+        if self.torque is not None:
+            ts = self.torque
+            out["torque_set"] = {
+                "direction": _list(ts.direction),
+                "dq": _list(ts.dq),
+                "phi": ts.phi,
+                "nlp_status": ts.nlp_status,
+                "vertices": _list(ts.vertices),
+                "rays": _list(ts.generators.rays),
+                "lines": _list(ts.generators.lines),
+                "recommended": _list(ts.tau),
+                "contact_forces": _list(ts.f_c),
+                "work": ts.work,
+                "residuals": ts.residuals(ts.f_c),
+            }
+        if self.torque_error is not None:
+            out["torque_set_error"] = self.torque_error
+        if self.uncertainty is not None:
+            u = self.uncertainty
+            out["friction_uncertainty"] = {"nu": u.nu, "lambda": _list(u.lambdas), "feasible": u.feasible,
+                                           "tau": None if u.tau is None else _list(u.tau), "reason": u.reason}
+        if self.regrasp is not None:
+            out["regrasp"] = {"J_d": _list(self.regrasp.J_d), "rays": _list(self.regrasp.rays),
+                              "lines": _list(self.regrasp.lines), "exact": self.regrasp.exact,
+                              "equilibrium": [bool(b) for b in self.regrasp.feasible]}
+        return out
+
+
+def _grasp_json(g: StationaryGrasp) -> dict[str, Any]:
+    return {"kind": g.kind, "tau": _list(g.tau), "contact_forces": _list(g.f_c), "margin": g.margin,
+            "total_normal": g.total_normal}
+
+
+def _list(a: Array) -> Any:
+    return np.round(np.asarray(a, dtype=float), 12).tolist()
+
+
+def analyze_combination(
+    system: GraspSystem,
+    combination: str,
+    direction: Array | None = None,
+    nu: float | None = None,
+    samples: int = 120,
+) -> CombinationReport:
+    """Full report of one combination; ``direction`` picks the motion for the torque set
+    (default: the example DAFC direction); ``nu`` adds the friction-uncertainty combination."""
+    parts = CombinationParts.build(system, combination)
+    sy, sel, ms, st, fs = parts.system, parts.sel, parts.ms, parts.st, parts.fs
+    try:
+        grasp: StationaryGrasp | None = stationary_grasp(sy, sel, st, fs, "interior")
+        grasp_min: StationaryGrasp | None = stationary_grasp(sy, sel, st, fs, "min_grip")
+    except NoStationaryGrasp:
+        grasp = grasp_min = None
+    summary = summarize(parts, stationary_known=grasp is not None)
+    oracle = parts.oracle()
+    dset = dafc_set(oracle, samples=samples) if ms.a_bar else None
+    dp = dpfc(st, fs, grasp) if grasp is not None else None
+    rg = regrasp_cone(sy, sel, ms, st, fs) if grasp is not None else None
+    torque: TorqueSet | None = None
+    err: str | None = None
+    dtest: DirectionTest | None = None
+    unc: FrictionUncertainty | None = None
+    target = None
+    if direction is not None:
+        target = np.asarray(direction, dtype=float)
+        dtest = oracle.test(target)
+    elif summary.example_direction is not None:
+        target = summary.example_direction
+    if grasp is not None and target is not None:
+        try:
+            torque = torque_set(sy, sel, ms, st, fs, grasp, target, oracle=oracle)
+        except CTPError as e:
+            err = str(e)
+    elif target is not None:
+        err = "no stationary grasp (18): the torque set is not defined"
+    if torque is not None and nu is not None:
+        unc = friction_uncertainty(sy, sel, st, fs, torque, nu)
+    return CombinationReport(summary, parts, grasp, grasp_min, dset, dp, torque, err, dtest, unc, rg)

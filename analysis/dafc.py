@@ -1,0 +1,489 @@
+"""Direction of active force closure, DAFC (paper eq. 22).
+
+For a FIXED motion ``dzeta_c`` the slip of every S-point is fixed, so kinetic friction is linear
+in the normal forces and every condition of (22) is linear in the contact forces. Membership of
+an object direction ``dr`` is then one LP over the total contact forces ``f_c``:
+
+    sup  dr^T (G_c f_c + w_s(f_c) + w_ex)
+    s.t. f_c in F (16),   Xi^T (G_c f_c + w_s(f_c) + w_ex) = 0      [(I - P) part of (22), W_2]
+
+``w_s`` is the S-point friction (12). ``dr`` is a member iff the supremum is positive, possibly
+unbounded (scale-free). The sum ``G_c f_c + w_s + w_ex`` equals the added wrench
+``D tau_ad + Xi xi_ad + w_s`` of (25) because ``G_c f_st = -w_ex``, so membership does not depend
+on which stationary solution was picked. DAFC is existential over the finger redundancy
+``dzeta~_r``: the direction must be allowable (``A_d Phi_full dzeta_c <= 0``, eq. 20) for some
+redundancy, and every S-point must really slide (non-zero slip).
+
+Exactness: with no S-point whose slip depends on the redundancy, the redundancy only enters
+through the linear allowability constraints, so the oracle is exact. Otherwise the oracle tests
+the least-L1 redundancy and a seeded set of alternatives (a local, not a global, search) and
+reports ``exact = False``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from analysis._types import Array
+from analysis.contacts import GraspSystem, Selection
+from analysis.friction import FrictionSet, kinetic_friction
+from analysis.motion import MotionSpace
+from analysis.solvers.cdd import Generators, cone_generators
+from analysis.solvers.highs import LPModel, solve_lp
+from analysis.statics import Statics
+
+#: Relative tolerance on "positive work" and on non-penetration.
+WORK_TOL = 1e-9
+ALLOW_TOL = 1e-9
+#: An S-point "really slides" when its slip exceeds this fraction of the motion size.
+SLIP_TOL = 1e-7
+
+SEMANTICS: dict[str, str] = {
+    "dafc_unknowns": "total contact forces f_c; membership does not depend on the stationary solution",
+    "dafc_scale": "scale-free: member iff the supremum of the work is positive (possibly unbounded)",
+    "dafc_redundancy": "existential over the finger redundancy dzeta~_r; the torque problem (31) then "
+    "picks the motion minimising phi = |dq|",
+    "dafc_w3": "DAFC has no W_3 condition; the torque set (30)-(32) does",
+    "s_point": "an S-point must slide (non-zero slip); its kinetic friction is exactly mu n against the "
+    "slip (no pyramid); in the stationary state (18) it carries a normal force only",
+    "d_point": "a D-point carries no force and must not penetrate (A_d [dq; dr] <= 0, equality allowed)",
+    "n_point": "N is the state of a contact with mu = 0 (normal force only)",
+    "torque_limits": "joint-torque limits apply to torque sets, not to DAFC",
+    "friction_cone_3d": "F-point cones in 3-D are inscribed k-sided pyramids (k = friction_cone_sides)",
+}
+
+
+@dataclass(frozen=True)
+class DirectionTest:
+    """The DAFC oracle's answer for one object direction."""
+
+    direction: Array  # (D,) unit object motion dr
+    u: Array  # (a_bar,) its coordinates on Lambda~_r
+    zeta_c: Array | None  # (a,) the motion tested (None when not allowable)
+    member: bool
+    work: float  # supremum of the work (inf when unbounded, nan when not tested)
+    reason: str
+    exact: bool
+    forces: Array | None = None  # (L_c,) a maximiser of the work (None when unbounded)
+
+    def __post_init__(self) -> None:
+        assert abs(float(np.linalg.norm(self.direction)) - 1.0) < 1e-6 or not self.member
+
+
+class DAFCOracle:
+    """Exact LP membership test of eq. (22) for one combination."""
+
+    def __init__(self, system: GraspSystem, sel: Selection, ms: MotionSpace, st: Statics, fs: FrictionSet):
+        self.system, self.sel, self.ms, self.st, self.fs = system, sel, ms, st, fs
+        self.Xi = st.Xi  # (D, p)
+        self.B = ms.B  # (#D, a)
+        self.Ps = ms.P_s  # (d #S, a)
+        a_bar = ms.a_bar
+        d = system.d
+        # Does the slip of some S-point depend on the redundancy?
+        self.slip_depends_on_redundancy = bool(
+            len(sel.s_index) and ms.n_redundant and np.abs(self.Ps[:, a_bar:]).max() > 1e-9
+        )
+        self.exact = not self.slip_depends_on_redundancy
+        self._lp: LPModel | None = None
+        self._relaxed: LPModel | None = None
+        self._G_relaxed = np.zeros((system.D, 0))
+        self._d = d
+        self.lp_count = 0
+
+    # -- kinematics -----------------------------------------------------------------------------
+
+    def redundancy_for(self, u: Array) -> Array | None:
+        """Least-L1 redundancy ``dzeta~_r`` making ``[u; dzeta~_r]`` allowable (eq. 20), or None."""
+        ms = self.ms
+        a_bar, nr = ms.a_bar, ms.n_redundant
+        B_u, B_r = self.B[:, :a_bar], self.B[:, a_bar:]
+        rhs = -(B_u @ u)  # (#D,)
+        if self.B.shape[0] == 0:
+            return np.zeros(nr)
+        tol = ALLOW_TOL * max(1.0, float(np.linalg.norm(u)))
+        if nr == 0 or not np.any(B_r):
+            return np.zeros(nr) if np.all(rhs >= -tol) else None
+        # z = [z+ ; z-] >= 0, zeta = z+ - z-, minimise sum(z)
+        A_ub = np.hstack([B_r, -B_r])
+        res = solve_lp(np.ones(2 * nr), A_ub=A_ub, b_ub=rhs + tol, lb=0.0)
+        self.lp_count += 1
+        if res.status != "optimal":
+            return None
+        assert res.x is not None
+        return res.x[:nr] - res.x[nr:]
+
+    def slips_of(self, zeta_c: Array) -> Array:
+        """Slip of each S-point ``(#S, d)`` for the motion ``dzeta_c`` (eq. 21)."""
+        return (self.Ps @ zeta_c).reshape(len(self.sel.s_index), self._d)
+
+    # -- forces ---------------------------------------------------------------------------------
+
+    def _relaxed_model(self) -> LPModel:
+        """LP over ``[f_c; t_s]`` where every S-point's friction ``t_s`` may take any tangential
+        direction with ``|t| <= mu n`` (a circumscribed pyramid in 3-D): a relaxation of the
+        kinetic friction of (22) valid for every slip, hence for every redundancy."""
+        if self._relaxed is None:
+            sy, sel, st, fs = self.system, self.sel, self.st, self.fs
+            d, L_c, nS = sy.d, st.G_c.shape[1], len(sel.s_index)
+            n_var = L_c + d * nS
+            rows: list[Array] = [np.hstack([fs.C, np.zeros((fs.C.shape[0], d * nS))])]
+            eq_rows: list[Array] = []
+            G_S = np.zeros((sy.D, d * nS))
+            k_sides = sy.friction_sides
+            for k, i in enumerate(sel.s_index):
+                n, T = sy.normals[i], sy.tangents[i]
+                col_n = sel.c_slices[i].start
+                cols = slice(L_c + d * k, L_c + d * (k + 1))
+                G_S[:, d * k : d * (k + 1)] = sy.G_blocks[i]
+                e = np.zeros(n_var)
+                e[cols] = n
+                eq_rows.append(e)
+                if d == 2:
+                    dirs = [T[0], -T[0]]
+                    mu = sy.mu[i]
+                else:
+                    ang = 2 * np.pi * np.arange(k_sides) / k_sides
+                    dirs = [np.cos(a) * T[0] + np.sin(a) * T[1] for a in ang]
+                    mu = sy.mu[i] / np.cos(np.pi / k_sides)
+                for c in dirs:
+                    r = np.zeros(n_var)
+                    r[cols] = c
+                    r[col_n] = -mu
+                    rows.append(r[None, :])
+            self._G_relaxed = np.hstack([st.G_c, G_S])  # (D, n_var)
+            A_eq = np.vstack([self.Xi.T @ self._G_relaxed, *[e[None, :] for e in eq_rows]])
+            b_eq = np.concatenate([-(self.Xi.T @ sy.w_ex), np.zeros(len(eq_rows))])
+            A_ub = np.vstack(rows)
+            self._relaxed = LPModel(n_var, A_ub=A_ub, b_ub=np.zeros(A_ub.shape[0]), A_eq=A_eq, b_eq=b_eq)
+        return self._relaxed
+
+    def relaxed_work_sup(self, dr: Array) -> float:
+        """Upper bound of the work over every slip choice (see :meth:`_relaxed_model`)."""
+        model = self._relaxed_model()
+        res = model.solve(self._G_relaxed.T @ dr, maximize=True)
+        self.lp_count += 1
+        if res.status == "unbounded":
+            return np.inf
+        if res.status == "infeasible":
+            return -np.inf
+        assert res.objective is not None
+        return float(res.objective + dr @ self.system.w_ex)
+
+    def _fixed_lp(self) -> LPModel:
+        if self._lp is None:
+            st, fs = self.st, self.fs
+            self._lp = LPModel(
+                st.G_c.shape[1],
+                A_ub=fs.C,
+                b_ub=np.zeros(fs.C.shape[0]),
+                A_eq=self.Xi.T @ st.G_c,
+                b_eq=-(self.Xi.T @ self.system.w_ex),
+            )
+        return self._lp
+
+    def work_sup(self, dr: Array, zeta_c: Array) -> tuple[float, Array | None]:
+        """``sup dr^T (G_c f + w_s + w_ex)`` over the admissible forces for the motion ``zeta_c``."""
+        st, fs = self.st, self.fs
+        w_ex = self.system.w_ex
+        if not self.sel.s_index:
+            model = self._fixed_lp()
+            G_eff = st.G_c
+        else:
+            kf = kinetic_friction(self.system, self.sel, self.slips_of(zeta_c))
+            G_eff = st.G_c + kf.G_w
+            model = LPModel(
+                G_eff.shape[1],
+                A_ub=fs.C,
+                b_ub=np.zeros(fs.C.shape[0]),
+                A_eq=self.Xi.T @ G_eff,
+                b_eq=-(self.Xi.T @ w_ex),
+            )
+        if G_eff.shape[1] == 0:
+            return float(dr @ w_ex), np.zeros(0)
+        res = model.solve(G_eff.T @ dr, maximize=True)
+        self.lp_count += 1
+        if res.status == "unbounded":
+            return np.inf, None
+        if res.status == "infeasible":
+            return -np.inf, None
+        assert res.objective is not None
+        return float(res.objective + dr @ w_ex), res.x
+
+    # -- membership -----------------------------------------------------------------------------
+
+    def test(self, dr: Array, zeta_r: Array | None = None) -> DirectionTest:
+        """Is the object direction ``dr`` (any scale, in the motion space) in DAFC?"""
+        ms = self.ms
+        dr = np.asarray(dr, dtype=float)
+        u = ms.coordinates(dr)
+        nu = float(np.linalg.norm(u))
+        if ms.a_bar == 0 or nu < 1e-12:
+            return DirectionTest(dr, u, None, False, np.nan, "object cannot move (motion space is {0})", True)
+        if float(np.linalg.norm(ms.Lambda_r_t @ u - dr)) > 1e-6 * max(1.0, float(np.linalg.norm(dr))):
+            return DirectionTest(dr, u, None, False, np.nan, "direction is outside the motion space", True)
+        u = u / nu
+        dr = ms.Lambda_r_t @ u
+        scale = 1.0 + float(np.linalg.norm(self.system.w_ex))
+        if self.sel.s_index and zeta_r is None and self.relaxed_work_sup(dr) <= WORK_TOL * scale:
+            return DirectionTest(dr, u, None, False, np.nan,
+                                 "the fingers cannot do positive work, whatever the S-points' slip", True)
+        candidates: list[Array] = []
+        if zeta_r is not None:
+            candidates.append(np.asarray(zeta_r, dtype=float))
+        else:
+            z0 = self.redundancy_for(u)
+            if z0 is None:
+                return DirectionTest(dr, u, None, False, np.nan, "not allowable: a D-point would penetrate",
+                                     True)
+            candidates.append(z0)
+            if self.slip_depends_on_redundancy:
+                candidates.extend(self._alternative_redundancies(u, z0))
+        last: DirectionTest | None = None
+        for zr in candidates:
+            zc = ms.zeta_c(u, zr)
+            if self.B.shape[0] and np.any(self.B @ zc > ALLOW_TOL * max(1.0, float(np.linalg.norm(zc)))):
+                last = DirectionTest(dr, u, zc, False, np.nan, "not allowable: a D-point would penetrate",
+                                     self.exact)
+                continue
+            if self.sel.s_index:
+                sl = self.slips_of(zc)
+                still = [i for k, i in enumerate(self.sel.s_index)
+                         if np.linalg.norm(sl[k]) <= SLIP_TOL * float(np.linalg.norm(zc))]
+                if still:
+                    last = DirectionTest(dr, u, zc, False, np.nan,
+                                         f"S-point {still[0]} does not slide for this motion", self.exact)
+                    continue
+            sup, f = self.work_sup(dr, zc)
+            if sup > WORK_TOL * scale:
+                return DirectionTest(dr, u, zc, True, sup, "member", self.exact, f)
+            last = DirectionTest(dr, u, zc, False, sup, "the fingers cannot do positive work", self.exact, f)
+        assert last is not None
+        return last
+
+    def _alternative_redundancies(self, u: Array, z0: Array, count: int = 4) -> list[Array]:
+        """Alternatives to the least-L1 redundancy that stay allowable.
+
+        First the redundancy whose slips make kinetic friction drag the object along its motion
+        (slip of the object relative to the finger opposite to the object point's tangential
+        velocity, eq. 11) and its opposite, by least squares; then seeded random ones.
+        """
+        ms, sy, sel = self.ms, self.system, self.sel
+        a_bar, nr, d = ms.a_bar, ms.n_redundant, self._d
+        dr = ms.Lambda_r_t @ u
+        base = self.Ps[:, :a_bar] @ u  # (d #S,) slip with zero redundancy
+        Pr = self.Ps[:, a_bar:]  # (d #S, r)
+        target = np.zeros_like(base)
+        for k, i in enumerate(sel.s_index):
+            v = sy.G_blocks[i].T @ dr  # object point velocity
+            n = sy.normals[i]
+            vt = v - (v @ n) * n
+            target[k * d : (k + 1) * d] = -vt
+        scale = max(1.0, float(np.linalg.norm(ms.Lambda_q_t @ u)))
+        cands: list[Array] = []
+        for sign in (1.0, -1.0):
+            tn = float(np.linalg.norm(target))
+            if tn < 1e-12:
+                break
+            z, *_ = np.linalg.lstsq(Pr, sign * scale * target / tn - base, rcond=None)
+            cands.append(z)
+        rng = np.random.default_rng(0)
+        cands.extend(z0 + scale * rng.standard_normal(nr) for _ in range(count))
+        out = []
+        for z in cands:
+            zc = ms.zeta_c(u, z)
+            if not self.B.shape[0] or np.all(self.B @ zc <= ALLOW_TOL * max(1.0, float(np.linalg.norm(zc)))):
+                out.append(z)
+        return out
+
+
+# ------------------------------------------------------------------------------------------------
+# The set of DAFC directions
+
+
+@dataclass(frozen=True)
+class DAFCSet:
+    """DAFC over the unit sphere of the motion space.
+
+    ``directions`` are unit object motions (world frame, paper coordinates) with their oracle
+    answers; ``allowable`` generates the allowable cone ``A_r`` (eq. 20) in object coordinates.
+    Where there are no S-points DAFC is exactly ``A_r`` minus the closed convex cone of directions
+    in which no admissible force does positive work, so it is non-empty iff a generator of ``A_r``
+    is a member, and then has the dimension of ``A_r``.
+    """
+
+    directions: Array  # (n, D)
+    member: Array  # (n,) bool
+    work: Array  # (n,)
+    allowable: Generators  # generators of A_r in R^D (rays, lines)
+    dim: int
+    exact: bool
+    tests: tuple[DirectionTest, ...] = field(default=(), repr=False)
+
+    @property
+    def empty(self) -> bool:
+        return not bool(np.any(self.member))
+
+    def members(self) -> Array:
+        return self.directions[self.member]
+
+    def best(self) -> DirectionTest | None:
+        """The member with the largest work margin (finite margins first normalised)."""
+        cands = [t for t in self.tests if t.member]
+        if not cands:
+            return None
+        return max(cands, key=lambda t: (np.isinf(t.work), t.work if np.isfinite(t.work) else 0.0))
+
+
+def allowable_cone(ms: MotionSpace) -> Generators:
+    """Generators of the allowable object motions ``A_r`` (eq. 20), in ``dzeta~`` coordinates."""
+    if ms.a == 0:
+        return Generators(np.zeros((1, ms.a_bar)), np.zeros((0, ms.a_bar)), np.zeros((0, ms.a_bar)))
+    g = cone_generators(ms.B) if ms.B.shape[0] else Generators(
+        np.zeros((1, ms.a)), np.zeros((0, ms.a)), np.eye(ms.a)
+    )
+    P = np.hstack([np.eye(ms.a_bar), np.zeros((ms.a_bar, ms.n_redundant))])
+    return g.map(P)
+
+
+def _dedupe(U: Array) -> Array:
+    out: list[Array] = []
+    for u in U:
+        if not any(float(u @ v) > 1 - 1e-9 for v in out):
+            out.append(u)
+    return np.array(out).reshape(-1, U.shape[1] if U.ndim == 2 else 0)
+
+
+def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[DirectionTest | None, int, bool]:
+    """Decide whether DAFC is empty; return (a member or None, dim DAFC, exact).
+
+    Without S-points: test the generators of the allowable cone; exact (see :class:`DAFCSet`).
+    With S-points: (1) the relaxation with free friction directions is tested on the generators,
+    which proves emptiness exactly when none does positive work; (2) otherwise seeded interior
+    samples of the cone (centroid first) and then the generators are tested exactly, stopping at
+    the first member. A member in the relative interior of ``A_r`` has a neighbourhood of
+    members in ``A_r`` (the slips and the LP data vary continuously), so DAFC then has the
+    dimension of ``A_r``; a member found only on the boundary gives the rank of the members.
+    These answers are marked ``exact = False`` (a local search over slips and redundancy).
+    """
+    ms = oracle.ms
+    if ms.a_bar == 0:
+        return None, 0, True
+    gen = allowable_cone(ms)
+    dirs = gen.all_directions()  # (k, a_bar)
+    if dirs.shape[0] == 0:
+        return None, 0, True
+    cone_dim = int(np.linalg.matrix_rank(dirs, tol=1e-9))
+    generators = list(_dedupe(dirs))
+    if not oracle.sel.s_index:
+        for u in generators:
+            t = oracle.test(ms.Lambda_r_t @ u)
+            if t.member:
+                return t, cone_dim, True
+        return None, 0, True
+    # (1) relaxation: exact emptiness certificate
+    scale = 1.0 + float(np.linalg.norm(oracle.system.w_ex))
+    positive = [u for u in generators if oracle.relaxed_work_sup(ms.Lambda_r_t @ u) > WORK_TOL * scale]
+    if not positive:
+        return None, 0, True
+    # (2) interior samples, then generators
+    rng = np.random.default_rng(1)
+    interior: list[Array] = []
+    centroid = dirs.sum(axis=0)
+    if np.linalg.norm(centroid) > 1e-9:
+        interior.append(centroid / np.linalg.norm(centroid))
+    for _ in range(extra_samples):
+        v = rng.random(len(dirs)) @ dirs
+        if np.linalg.norm(v) > 1e-9:
+            interior.append(v / np.linalg.norm(v))
+    members: list[Array] = []
+    best: DirectionTest | None = None
+    for u in interior:
+        t = oracle.test(ms.Lambda_r_t @ u)
+        if t.member:
+            return t, cone_dim, False
+    for u in positive:
+        t = oracle.test(ms.Lambda_r_t @ u)
+        if t.member:
+            members.append(t.u)
+            best = best or t
+    if best is None:
+        return None, 0, False
+    return best, int(np.linalg.matrix_rank(np.array(members), tol=1e-6)), False
+
+
+def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int = 0) -> DAFCSet:
+    """Sample the unit sphere of the motion space, test every direction, refine boundaries.
+
+    ``a_bar = 1``: both directions; ``a_bar = 2``: a circle of ``samples`` angles; more: a seeded
+    Fibonacci/Gaussian sample plus the allowable cone's generators. Each adjacent (member,
+    non-member) pair on the circle (``a_bar = 2``) or nearest-neighbour pair is bisected
+    ``refine`` times along the great circle.
+    """
+    ms = oracle.ms
+    a_bar = ms.a_bar
+    gen_u = allowable_cone(ms)
+    gen = gen_u.map(ms.Lambda_r_t) if a_bar else Generators(np.zeros((1, ms.D)), np.zeros((0, ms.D)),
+                                                             np.zeros((0, ms.D)))
+    if a_bar == 0:
+        return DAFCSet(np.zeros((0, ms.D)), np.zeros(0, bool), np.zeros(0), gen, 0, True)
+    rng = np.random.default_rng(seed)
+    U: Array
+    if a_bar == 1:
+        U = np.array([[1.0], [-1.0]])
+    elif a_bar == 2:
+        th = np.linspace(0, 2 * np.pi, samples, endpoint=False)
+        U = np.stack([np.cos(th), np.sin(th)], axis=1)
+    elif a_bar == 3:
+        i = np.arange(samples) + 0.5
+        phi = np.arccos(1 - 2 * i / samples)
+        lon = np.pi * (1 + 5**0.5) * i
+        U = np.stack([np.cos(lon) * np.sin(phi), np.sin(lon) * np.sin(phi), np.cos(phi)], axis=1)
+    else:
+        U = rng.standard_normal((samples, a_bar))
+        U /= np.linalg.norm(U, axis=1, keepdims=True)
+    extra = gen_u.all_directions()
+    if extra.size:
+        U = np.vstack([U, extra])
+    tests = [oracle.test(ms.Lambda_r_t @ u) for u in U]
+    member = np.array([t.member for t in tests])
+    # boundary refinement
+    if refine and member.any() and (~member).any() and a_bar >= 2:
+        new: list[DirectionTest] = []
+        Ut = np.array([t.u for t in tests])
+        pairs: list[tuple[int, int]] = []
+        if a_bar == 2:
+            pairs = [(k, (k + 1) % samples) for k in range(samples) if member[k] != member[(k + 1) % samples]]
+        else:
+            cos = Ut @ Ut.T
+            others = np.flatnonzero(~member)
+            for km in np.flatnonzero(member):
+                jm = int(others[int(np.argmax(cos[km, others]))])
+                pairs.append((int(km), jm))
+        for k, j in pairs[:64]:
+            a, b = Ut[k], Ut[j]
+            in_a = bool(member[k])
+            for _ in range(refine):
+                m = a + b
+                if np.linalg.norm(m) < 1e-12:
+                    break
+                m /= np.linalg.norm(m)
+                t = oracle.test(ms.Lambda_r_t @ m)
+                new.append(t)
+                if t.member == in_a:
+                    a = m
+                else:
+                    b = m
+        tests.extend(new)
+    member = np.array([t.member for t in tests])
+    dirs = np.array([t.direction for t in tests]).reshape(-1, ms.D)
+    work = np.array([t.work for t in tests])
+    if not member.any():
+        dim = 0
+    elif not oracle.sel.s_index:
+        dim = int(np.linalg.matrix_rank(gen_u.all_directions(), tol=1e-9))
+    else:
+        dim = int(np.linalg.matrix_rank(dirs[member], tol=1e-6))
+    return DAFCSet(dirs, member, work, gen, dim, oracle.exact and not oracle.sel.s_index, tuple(tests))

@@ -1,0 +1,156 @@
+"""Friction sets (paper eq. 11-17) as linear constraints on ``f_c``.
+
+``f_c`` stacks, per contact in scene order, the full force of an F-point (``d`` components,
+world frame) and the normal component of an S- or N-point (one scalar); D-points carry no
+force. The friction set ``F`` (16) is ``{f_c : C f_c <= 0}``:
+
+* F-point (13): 2-D exactly, ``|t^T f| <= mu n^T f``; 3-D the ``k``-sided pyramid inscribed in
+  the cone (generators ``n + mu (cos phi_j t1 + sin phi_j t2)``, ``phi_j = 2 pi j / k``), whose
+  facets are ``(cos psi_j t1 + sin psi_j t2)^T f <= mu cos(pi/k) n^T f`` with
+  ``psi_j = (2 j + 1) pi / k``;
+* N-point and the normal of an S-point (14): ``n_f >= 0``;
+* the tangential force of an S-point (15, 11) is kinetic friction ``t = -mu n_f s`` against the
+  unit slip ``s`` of the object relative to the finger; it is linear in ``n_f`` once ``s`` is
+  fixed (:func:`kinetic_friction`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from analysis._types import Array
+from analysis.contacts import GraspSystem, Selection
+
+
+@dataclass(frozen=True)
+class FrictionSet:
+    """``F = {f_c : C f_c <= 0}`` (eq. 16), its generators, and normal-force read-out."""
+
+    C: Array  # (m, L_c) friction rows, each of unit norm
+    row_contact: Array  # (m,) contact index of each row
+    E: Array  # (L_c, g) generators: F = {E lam, lam >= 0}
+    N: Array  # (L, L_c) normal force of each contact: n_f = N f_c (zero rows for D-points)
+
+    def contains(self, f_c: Array, tol: float = 1e-7) -> bool:
+        scale = max(1.0, float(np.max(np.abs(f_c), initial=0.0)))
+        return bool(np.all(self.C @ f_c <= tol * scale))
+
+    def violation(self, f_c: Array) -> float:
+        """Largest violation ``max(C f_c)`` (<= 0 inside)."""
+        return float(np.max(self.C @ f_c, initial=0.0))
+
+
+def friction_set(system: GraspSystem, sel: Selection, mu_scale: float = 1.0) -> FrictionSet:
+    """Eq. (13), (14), (16) for the combination ``sel``; ``mu_scale`` (``nu``) scales every mu."""
+    d, k = system.d, system.friction_sides
+    L_c = sel.L_c
+    rows: list[Array] = []
+    owners: list[int] = []
+    gens: list[Array] = []
+    N = np.zeros((system.L, L_c))
+    for i, s in enumerate(sel.combination):
+        sl = sel.c_slices[i]
+        if s == "D":
+            continue
+        n = system.normals[i]
+        mu = mu_scale * system.mu[i]
+        if s == "F":
+            N[i, sl] = n
+            T = system.tangents[i]  # (d-1, d)
+            if d == 2:
+                facets = [T[0] - mu * n, -T[0] - mu * n]
+                gdirs = [n + mu * T[0], n - mu * T[0]]
+            else:
+                psi = (2 * np.arange(k) + 1) * np.pi / k
+                phi = 2 * np.arange(k) * np.pi / k
+                c = np.cos(np.pi / k)
+                facets = [np.cos(a) * T[0] + np.sin(a) * T[1] - mu * c * n for a in psi]
+                gdirs = [n + mu * (np.cos(a) * T[0] + np.sin(a) * T[1]) for a in phi]
+            if mu == 0.0:
+                facets = [-n]
+                gdirs = [n]
+                # a frictional contact at nu = 0 keeps the tangential force zero
+                for t in system.tangents[i]:
+                    for sign in (1.0, -1.0):
+                        row = np.zeros(L_c)
+                        row[sl] = sign * t
+                        rows.append(row)
+                        owners.append(i)
+            for fr in facets:
+                row = np.zeros(L_c)
+                row[sl] = fr / np.linalg.norm(fr)
+                rows.append(row)
+                owners.append(i)
+            for g in gdirs:
+                col = np.zeros(L_c)
+                col[sl] = g
+                gens.append(col)
+        else:  # S or N: scalar normal force >= 0
+            N[i, sl] = 1.0
+            row = np.zeros(L_c)
+            row[sl] = -1.0
+            rows.append(row)
+            owners.append(i)
+            col = np.zeros(L_c)
+            col[sl] = 1.0
+            gens.append(col)
+    C = np.array(rows).reshape(len(rows), L_c)
+    E = np.array(gens).reshape(len(gens), L_c).T
+    return FrictionSet(C, np.array(owners, dtype=int), E, N)
+
+
+@dataclass(frozen=True)
+class KineticFriction:
+    """Kinetic friction of the S-points for a fixed slip (eq. 11-12), per unit normal force.
+
+    The friction force on the object at S-point ``i`` is ``t_i = -mu_i n_i s_i`` with ``s_i``
+    the unit slip of the object relative to the finger; it adds ``G_w @ f_c`` to the wrench
+    on the object and ``J_w @ f_c`` to the joint torque (``tau = J^T f``).
+    """
+
+    slips: Array  # (#S, d) unit slip directions, scene order of S-points
+    mu_s: Array  # (#S,) friction coefficients used (nu * mu)
+    G_w: Array  # (D, L_c)  wrench of the friction forces, linear in the S normal forces
+    J_w: Array  # (M, L_c)  joint torque that balances them
+
+    def forces(self, system: GraspSystem, sel: Selection, f_c: Array) -> Array:
+        """Tangential friction forces ``(#S, d)`` for the normal forces in ``f_c``."""
+        out = np.zeros((len(sel.s_index), system.d))
+        for k, i in enumerate(sel.s_index):
+            n_f = float(f_c[sel.c_slices[i]][0])
+            out[k] = -self.mu_s[k] * n_f * self.slips[k]
+        return out
+
+
+def slips(system: GraspSystem, sel: Selection, A_full_motion: Array) -> Array:
+    """Slip ``dp_C = dp_CO - dp_CF = -A_i [dq; dr]`` of each S-point: ``(#S, d)``."""
+    out = np.zeros((len(sel.s_index), system.d))
+    for k, i in enumerate(sel.s_index):
+        out[k] = -system.contact_A(i) @ A_full_motion
+    return out
+
+
+def kinetic_friction(
+    system: GraspSystem, sel: Selection, slip: Array, mu_scale: float = 1.0
+) -> KineticFriction:
+    """Friction columns of eq. (12) for given slips ``(#S, d)`` (normalised here)."""
+    L_c = sel.L_c
+    G_w = np.zeros((system.D, L_c))
+    J_w = np.zeros((system.M, L_c))
+    units = np.zeros((len(sel.s_index), system.d))
+    mu_s = np.zeros(len(sel.s_index))
+    for k, i in enumerate(sel.s_index):
+        s = np.asarray(slip[k], dtype=float)
+        norm = float(np.linalg.norm(s))
+        if norm == 0.0:
+            raise ValueError(f"S-point {i} has zero slip: kinetic friction direction undefined")
+        s = s / norm
+        units[k] = s
+        col = sel.c_slices[i].start
+        mu_s[k] = mu_scale * system.mu[i]
+        t = -mu_s[k] * s  # friction force per unit normal force
+        G_w[:, col] = system.G_blocks[i] @ t
+        J_w[:, col] = system.J_blocks[i].T @ t
+    return KineticFriction(units, mu_s, G_w, J_w)

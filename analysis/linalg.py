@@ -1,0 +1,53 @@
+"""Orthonormal bases of null spaces and ranges (SVD with an explicit tolerance)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from analysis._types import Array
+
+#: Singular values below ``RANK_RTOL * max(1, s_max)`` count as zero.
+RANK_RTOL = 1e-9
+
+
+def _tol(s: Array) -> float:
+    return RANK_RTOL * max(1.0, float(s[0]) if s.size else 0.0)
+
+
+def null_space(A: Array) -> Array:
+    """Orthonormal basis ``(n, n - rank)`` of ``{x : A x = 0}`` for ``A`` of shape ``(m, n)``."""
+    A = np.asarray(A, dtype=float)
+    n = A.shape[1]
+    if A.shape[0] == 0:
+        return np.eye(n)
+    _, s, Vt = np.linalg.svd(A, full_matrices=True)
+    rank = int(np.sum(s > _tol(s)))
+    return Vt[rank:].T.copy()
+
+
+def orth(A: Array) -> Array:
+    """Orthonormal basis ``(m, rank)`` of the range of ``A`` of shape ``(m, n)``."""
+    A = np.asarray(A, dtype=float)
+    if A.size == 0:
+        return np.zeros((A.shape[0], 0))
+    U, s, _ = np.linalg.svd(A, full_matrices=False)
+    rank = int(np.sum(s > _tol(s)))
+    return U[:, :rank].copy()
+
+
+def rank(A: Array) -> int:
+    A = np.asarray(A, dtype=float)
+    if A.size == 0:
+        return 0
+    s = np.linalg.svd(A, compute_uv=False)
+    return int(np.sum(s > _tol(s)))
+
+
+def pinv(A: Array) -> Array:
+    """Moore-Penrose pseudo-inverse with the same rank tolerance as :func:`rank`."""
+    A = np.asarray(A, dtype=float)
+    if A.size == 0:
+        return np.zeros((A.shape[1], A.shape[0]))
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    keep = s > _tol(s)
+    return (Vt[keep].T / s[keep]) @ U[:, keep].T

@@ -1,0 +1,101 @@
+"""Motion space, finger redundancy and allowable motions (paper eq. 7, 19-21)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from analysis._types import Array
+from analysis.contacts import GraspSystem, Selection, constrained_matrices
+from analysis.linalg import null_space, orth, pinv
+
+
+@dataclass(frozen=True)
+class MotionSpace:
+    """Bases of the motions that keep the F/S/N contacts (eq. 7 and 19).
+
+    ``[dq; dr] = Phi_full dzeta_c`` with ``dzeta_c = [dzeta~ (a_bar); dzeta~_r (a - a_bar)]``:
+    the first ``a_bar`` coordinates move the object along the orthonormal columns of
+    ``Lambda_r_t`` (with the least-norm finger motion ``Lambda_q_t``), the others are the finger
+    redundancy ``Lambda_qr_t`` that leaves the object still.
+    """
+
+    M: int
+    Lambda: Array  # (M + D, a)     eq. 7, orthonormal basis of null(A_c)
+    Lambda_r_t: Array  # (D, a_bar)  Lambda~_r, orthonormal basis of range(Lambda_r)
+    Lambda_q_t: Array  # (M, a_bar)  Lambda~_q, J_c Lambda~_q = G_c^T Lambda~_r
+    Lambda_qr_t: Array  # (M, a - a_bar)  Lambda~_qr, orthonormal basis of null(J_c)
+    A_c: Array  # (L_c, M + D)
+    A_s: Array  # (d #S, M + D)
+    A_d: Array  # (#D, M + D)
+
+    def __post_init__(self) -> None:
+        a_bar, r = self.Lambda_r_t.shape[1], self.Lambda_qr_t.shape[1]
+        assert self.Lambda_q_t.shape == (self.M, a_bar)
+        assert self.Lambda.shape[1] == a_bar + r, "dim null(A_c) must equal a_bar + dim null(J_c)"
+
+    @property
+    def a(self) -> int:
+        return int(self.Lambda.shape[1])
+
+    @property
+    def a_bar(self) -> int:
+        return int(self.Lambda_r_t.shape[1])
+
+    @property
+    def n_redundant(self) -> int:
+        return int(self.Lambda_qr_t.shape[1])
+
+    @property
+    def D(self) -> int:
+        return int(self.Lambda_r_t.shape[0])
+
+    @property
+    def Phi_full(self) -> Array:
+        """``[[Lambda~_q, Lambda~_qr], [Lambda~_r, O]]``: ``(M + D, a)``, ``[dq; dr] = Phi_full dzeta_c``."""
+        top = np.hstack([self.Lambda_q_t, self.Lambda_qr_t])  # (M, a)
+        bottom = np.hstack([self.Lambda_r_t, np.zeros((self.D, self.n_redundant))])  # (D, a)
+        return np.vstack([top, bottom])
+
+    @property
+    def Phi(self) -> Array:
+        """``Phi = [Lambda~_r, O]``: ``(D, a)``, ``dr = Phi dzeta_c``."""
+        return self.Phi_full[self.M :]
+
+    @property
+    def B(self) -> Array:
+        """``A_d Phi_full``: ``(#D, a)``; the allowable set is ``{dzeta_c : B dzeta_c <= 0}`` (eq. 20)."""
+        return self.A_d @ self.Phi_full
+
+    @property
+    def P_s(self) -> Array:
+        """``P_s = -A_s Phi_full``: ``(d #S, a)``; sliding ``dp_Cs = P_s dzeta_c`` (eq. 21)."""
+        return -self.A_s @ self.Phi_full
+
+    def zeta_c(self, u: Array, zeta_r: Array | None = None) -> Array:
+        """Stack object coordinates ``u`` (a_bar,) and redundancy (a - a_bar,) into ``dzeta_c``."""
+        zr = np.zeros(self.n_redundant) if zeta_r is None else np.asarray(zeta_r, dtype=float)
+        return np.concatenate([np.asarray(u, dtype=float), zr])
+
+    def coordinates(self, dr: Array) -> Array:
+        """Coordinates ``u = Lambda~_r^T dr`` of an object motion in the motion space."""
+        return self.Lambda_r_t.T @ np.asarray(dr, dtype=float)
+
+
+def motion_space(system: GraspSystem, sel: Selection) -> MotionSpace:
+    """Eq. (7) ``Lambda = null(A_c)`` and its split (19) into object motion and redundancy.
+
+    ``Lambda~_r = orth(Lambda_r)``; ``Lambda~_q = J_c^+ G_c^T Lambda~_r`` (least-norm finger
+    motion that keeps the F/S/N constraints while the object moves, so ``A_c Phi_full = 0``);
+    ``Lambda~_qr = null(J_c)``.
+    """
+    A_c, A_s, A_d = constrained_matrices(system, sel)
+    M = system.M
+    Lam = null_space(A_c)  # (M + D, a)
+    Lam_r_t = orth(Lam[M:])  # (D, a_bar)
+    J_c = A_c[:, :M]  # (L_c, M)
+    G_c_T = -A_c[:, M:]  # (L_c, D)
+    Lam_q_t = pinv(J_c) @ G_c_T @ Lam_r_t if M else np.zeros((0, Lam_r_t.shape[1]))
+    Lam_qr_t = null_space(J_c) if M else np.zeros((0, 0))
+    return MotionSpace(M, Lam, Lam_r_t, Lam_q_t, Lam_qr_t, A_c, A_s, A_d)

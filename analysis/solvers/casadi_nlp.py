@@ -1,0 +1,142 @@
+"""CasADi + IPOPT adapter for the torque problem's redundancy choice (paper eq. 31).
+
+Decision variables ``x = [dzeta~_r (r); f_c (L_c)]`` for a fixed unit object direction
+``u = dzeta~_d``:
+
+    min  phi^2 = |Lambda~_q u + Lambda~_qr dzeta~_r|^2 + eps |f_c|^2
+    s.t. A_d Phi_full [u; dzeta~_r] <= 0                          (allowable, eq. 20)
+         C f_c <= 0                                               (F, eq. 16)
+         |slip_i|^2 >= delta^2 for every S-point                  (an S-point must slide)
+         Xi^T w = 0,  N_u^T Lambda~_r^T w = 0,  u^T Lambda~_r^T w >= w_min   (W_2/W_3 rows of 30)
+    with w = G_c f_c - sum_i mu_i n_i G_i slip_i/|slip_i| + w_ex  (eq. 12).
+
+IPOPT's failures become :class:`SolverError`; a locally infeasible problem is reported as
+``found = False`` with IPOPT's status.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from analysis._types import Array
+from analysis.exceptions import SolverError
+
+_INFEASIBLE = {"Infeasible_Problem_Detected", "Restoration_Failed", "Local_Infeasibility"}
+_OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
+
+
+@dataclass(frozen=True)
+class RedundancyNLP:
+    """Data of problem (31); arrays in the paper's symbols."""
+
+    u: Array  # (a_bar,) unit object direction coordinates dzeta~_d
+    N_u: Array  # (a_bar, a_bar - 1) orthonormal complement of u
+    Lambda_q_t: Array  # (M, a_bar)
+    Lambda_qr_t: Array  # (M, r)
+    Lambda_r_t: Array  # (D, a_bar)
+    B: Array  # (#D, a) = A_d Phi_full
+    P_s: Array  # (d #S, a) slip of the S-points
+    C: Array  # (m, L_c) friction rows
+    G_c: Array  # (D, L_c)
+    G_s_blocks: Array  # (#S, D, d) grasp blocks of the S-points
+    s_cols: tuple[int, ...]  # column of each S-point's normal force in f_c
+    mu_s: Array  # (#S,)
+    Xi: Array  # (D, p)
+    w_ex: Array  # (D,)
+    with_forces: bool  # False: the forces do not depend on the redundancy (pure QP in dzeta~_r)
+    w_min: float = 1e-6
+    slip_min: float = 1e-4
+
+
+@dataclass(frozen=True)
+class RedundancyResult:
+    found: bool
+    status: str
+    zeta_r: Array  # (r,)
+    f_c: Array | None  # (L_c,)
+    phi: float
+
+
+def solve_redundancy(p: RedundancyNLP, zeta0: Array | None = None, max_iter: int = 300) -> RedundancyResult:
+    """Solve (31) with IPOPT from ``zeta0`` (default: zero redundancy)."""
+    r = p.Lambda_qr_t.shape[1]
+    L_c = p.C.shape[1]
+    a_bar = p.u.shape[0]
+    d = p.G_s_blocks.shape[2] if p.G_s_blocks.size else 0
+    nz = r
+    nf = L_c if p.with_forces else 0
+    x = ca.SX.sym("x", nz + nf)
+    z = x[:nz]
+    zc = ca.vertcat(ca.DM(p.u), z)
+    dq = ca.DM(p.Lambda_q_t) @ ca.DM(p.u) + ca.DM(p.Lambda_qr_t) @ z
+    obj = ca.sumsqr(dq)
+    g: list[ca.SX] = []
+    lbg: list[float] = []
+    ubg: list[float] = []
+    if p.B.shape[0]:
+        g.append(ca.DM(p.B) @ zc)
+        lbg += [-np.inf] * p.B.shape[0]
+        ubg += [0.0] * p.B.shape[0]
+    if p.with_forces:
+        f = x[nz:]
+        obj = obj + 1e-6 * ca.sumsqr(f)
+        g.append(ca.DM(p.C) @ f)
+        lbg += [-np.inf] * p.C.shape[0]
+        ubg += [0.0] * p.C.shape[0]
+        w = ca.DM(p.G_c) @ f + ca.DM(p.w_ex)
+        slip_all = ca.DM(p.P_s) @ zc
+        for k, col in enumerate(p.s_cols):
+            s = slip_all[k * d : (k + 1) * d]
+            nrm2 = ca.sumsqr(s)
+            g.append(nrm2)
+            lbg.append(p.slip_min**2)
+            ubg.append(np.inf)
+            w = w - p.mu_s[k] * f[col] * (ca.DM(p.G_s_blocks[k]) @ (s / ca.sqrt(nrm2 + 1e-12)))
+        if p.Xi.shape[1]:
+            g.append(ca.DM(p.Xi.T) @ w)
+            lbg += [0.0] * p.Xi.shape[1]
+            ubg += [0.0] * p.Xi.shape[1]
+        wr = ca.DM(p.Lambda_r_t.T) @ w
+        if a_bar > 1:
+            g.append(ca.DM(p.N_u.T) @ wr)
+            lbg += [0.0] * (a_bar - 1)
+            ubg += [0.0] * (a_bar - 1)
+        g.append(ca.DM(p.u).T @ wr)
+        lbg.append(p.w_min)
+        ubg.append(np.inf)
+    nlp = {"x": x, "f": obj, "g": ca.vertcat(*g) if g else ca.SX(0, 1)}
+    opts: dict[str, Any] = {
+        "ipopt.print_level": 0,
+        "print_time": 0,
+        "ipopt.sb": "yes",
+        "ipopt.max_iter": max_iter,
+        "ipopt.tol": 1e-10,
+        "ipopt.constr_viol_tol": 1e-9,
+        "error_on_fail": False,
+    }
+    try:
+        solver = ca.nlpsol("phi_min", "ipopt", nlp, opts)
+        x0 = np.zeros(nz + nf)
+        if zeta0 is not None:
+            x0[:nz] = zeta0
+        if p.with_forces:
+            x0[nz:] = 1.0 if L_c else 0.0
+        sol = solver(x0=x0, lbg=np.array(lbg), ubg=np.array(ubg))
+    except RuntimeError as e:
+        raise SolverError("IPOPT", str(e)) from e
+    status = str(solver.stats().get("return_status", "unknown"))
+    xs = np.asarray(sol["x"], dtype=float).ravel()
+    zeta = xs[:nz]
+    f_c = xs[nz:] if p.with_forces else None
+    phi = float(np.linalg.norm(p.Lambda_q_t @ p.u + p.Lambda_qr_t @ zeta))
+    if status in _OK:
+        return RedundancyResult(True, status, zeta, f_c, phi)
+    if status in _INFEASIBLE or "Infeasib" in status:
+        return RedundancyResult(False, status, zeta, f_c, phi)
+    if status in ("Maximum_Iterations_Exceeded", "Maximum_CpuTime_Exceeded"):
+        return RedundancyResult(False, status, zeta, f_c, phi)
+    raise SolverError("IPOPT", f"problem (31) ended with status '{status}'")

@@ -1,0 +1,290 @@
+"""Joint torques that move the object along a DAFC direction (paper eq. 29-32) and the
+friction-uncertainty combination (end of section IV-C).
+
+1. Problem (31): among the motions ``dzeta_c = [dzeta~_d; dzeta~_r]`` realising the unit
+   direction ``dzeta~_d``, pick the redundancy minimising ``phi = |dq|`` (CasADi/IPOPT,
+   :mod:`analysis.solvers.casadi_nlp`), subject to the set S of (30).
+2. Set (32) for that motion: with the slips fixed every condition of (30) is linear in the
+   contact forces, so ``T = {tau(f_c) : f_c in P}`` with
+
+       P = {f_c in F : Xi^T w = 0,  N_u^T Lambda~_r^T w = 0,  u^T Lambda~_r^T w >= 0},
+       w = G_c f_c + w_s(f_c) + w_ex,   tau(f_c) = J_c^T f_c + J_s^T t_s(f_c),
+
+   the total joint torque ``tau_st + tau_ad`` that balances the contact forces (kinetic friction
+   included), with no extra torque in the redundancy (``tau~ = 0`` in (29),
+   ``Lambda~_qr^T tau_ad = 0`` in (30)). Members with work ``> 0`` move the object; the face
+   ``work = 0`` (which contains ``tau_st``) is the closure of that set. T is reported as the
+   vertices and rays of the image of P (cdd), plus one recommended member.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from analysis._types import Array
+from analysis.contacts import GraspSystem, Selection
+from analysis.dafc import DAFCOracle
+from analysis.exceptions import EmptyTorqueSet, NotInDAFC
+from analysis.friction import FrictionSet, KineticFriction, kinetic_friction
+from analysis.linalg import null_space
+from analysis.motion import MotionSpace
+from analysis.solvers.casadi_nlp import RedundancyNLP, solve_redundancy
+from analysis.solvers.cdd import Generators, polyhedron_generators, reduce_generators
+from analysis.solvers.highs import solve_lp
+from analysis.statics import Statics
+from analysis.stationary import StationaryGrasp
+
+
+@dataclass(frozen=True)
+class TorqueSet:
+    """T of eq. (32) for one direction and its chosen motion."""
+
+    direction: Array  # (D,) unit object direction dr_d
+    u: Array  # (a_bar,) its coordinates dzeta~_d
+    zeta_c: Array  # (a,) the motion chosen by (31)
+    dq: Array  # (M,) finger motion for the unit object motion
+    phi: float  # |dq|
+    nlp_status: str
+    generators: Generators  # vertices and rays of T (joint space, M)
+    tau: Array  # (M,) the recommended member
+    f_c: Array  # (L_c,) its contact forces
+    work: float  # u^T Lambda~_r^T w of the recommended member (> 0)
+    # linear description of P in f_c and the map f_c -> tau, for certificates
+    A_ub: Array  # (m, L_c)
+    b_ub: Array  # (m,)
+    A_eq: Array  # (e, L_c)
+    b_eq: Array  # (e,)
+    T_map: Array  # (M, L_c)
+    W_map: Array  # (D, L_c) f_c -> w - w_ex
+    friction: KineticFriction | None
+
+    @property
+    def vertices(self) -> Array:
+        return self.generators.vertices
+
+    @property
+    def rays(self) -> Array:
+        return self.generators.all_directions()
+
+    def residuals(self, f_c: Array) -> dict[str, float]:
+        """Certificate of a member: inequality violation, equality residual, work."""
+        return {
+            "inequality": float(np.max(self.A_ub @ f_c - self.b_ub, initial=0.0)),
+            "equality": float(np.max(np.abs(self.A_eq @ f_c - self.b_eq), initial=0.0)),
+            "work": float(-(self.A_ub[-1] @ f_c) + self.b_ub[-1]) if self.A_ub.shape[0] else 0.0,
+        }
+
+
+def _chosen_motion(
+    oracle: DAFCOracle, system: GraspSystem, sel: Selection, ms: MotionSpace, st: Statics, fs: FrictionSet,
+    u: Array,
+) -> tuple[Array, str, float]:
+    """Problem (31): the redundancy minimising phi; returns (zeta_c, IPOPT status, phi)."""
+    r = ms.n_redundant
+    a_bar = ms.a_bar
+    if r == 0:
+        zc = ms.zeta_c(u)
+        return zc, "no redundancy", float(np.linalg.norm(ms.Lambda_q_t @ u))
+    d = system.d
+    s_cols = tuple(sel.c_slices[i].start for i in sel.s_index)
+    p = RedundancyNLP(
+        u=u,
+        N_u=null_space(u[None, :]) if a_bar > 1 else np.zeros((a_bar, 0)),
+        Lambda_q_t=ms.Lambda_q_t,
+        Lambda_qr_t=ms.Lambda_qr_t,
+        Lambda_r_t=ms.Lambda_r_t,
+        B=ms.B,
+        P_s=ms.P_s,
+        C=fs.C,
+        G_c=st.G_c,
+        G_s_blocks=np.array([system.G_blocks[i] for i in sel.s_index]).reshape(len(sel.s_index), system.D, d),
+        s_cols=s_cols,
+        mu_s=np.array([system.mu[i] for i in sel.s_index]),
+        Xi=st.Xi,
+        w_ex=system.w_ex,
+        with_forces=oracle.slip_depends_on_redundancy,
+    )
+    z0 = oracle.redundancy_for(u)
+    res = solve_redundancy(p, zeta0=z0)
+    if not res.found:
+        if z0 is not None and not oracle.slip_depends_on_redundancy:
+            # the QP is feasible at z0; IPOPT failing to certify it is a solver problem
+            return ms.zeta_c(u, z0), f"least-L1 redundancy (IPOPT: {res.status})", float(
+                np.linalg.norm(ms.Lambda_q_t @ u + ms.Lambda_qr_t @ z0))
+        raise EmptyTorqueSet(f"problem (31) has no solution for this direction (IPOPT: {res.status})")
+    return ms.zeta_c(u, res.zeta_r), res.status, res.phi
+
+
+def torque_set(
+    system: GraspSystem,
+    sel: Selection,
+    ms: MotionSpace,
+    st: Statics,
+    fs: FrictionSet,
+    grasp: StationaryGrasp,
+    direction: Array,
+    oracle: DAFCOracle | None = None,
+    work_target: float | None = None,
+) -> TorqueSet:
+    """Eq. (29)-(32) for the object direction ``direction`` (any scale, must be in DAFC)."""
+    oracle = oracle or DAFCOracle(system, sel, ms, st, fs)
+    test = oracle.test(np.asarray(direction, dtype=float))
+    if not test.member:
+        raise NotInDAFC(f"direction {np.round(direction, 4).tolist()} is not in DAFC: {test.reason}")
+    u = test.u
+    zc, status, phi = _chosen_motion(oracle, system, sel, ms, st, fs, u)
+    motion = ms.Phi_full @ zc  # (M + D,)
+    M = system.M
+    kf: KineticFriction | None = None
+    G_eff, T_map = st.G_c, st.J_c.T
+    if sel.s_index:
+        kf = kinetic_friction(system, sel, oracle.slips_of(zc))
+        G_eff = st.G_c + kf.G_w
+        T_map = st.J_c.T + kf.J_w
+    L_c = G_eff.shape[1]
+    a_bar = ms.a_bar
+    Lr = ms.Lambda_r_t
+    w_ex = system.w_ex
+    eq_rows = [st.Xi.T @ G_eff]
+    eq_rhs = [-(st.Xi.T @ w_ex)]
+    if a_bar > 1:
+        N_u = null_space(u[None, :])  # (a_bar, a_bar - 1)
+        eq_rows.append(N_u.T @ Lr.T @ G_eff)
+        eq_rhs.append(-(N_u.T @ Lr.T @ w_ex))
+    A_eq = np.vstack(eq_rows).reshape(-1, L_c)
+    b_eq = np.concatenate(eq_rhs)
+    work_row = u @ Lr.T @ G_eff  # (L_c,)  work = work_row f + u^T Lr^T w_ex
+    work0 = float(u @ Lr.T @ w_ex)
+    A_ub = np.vstack([fs.C, -work_row[None, :]])
+    b_ub = np.concatenate([np.zeros(fs.C.shape[0]), [work0]])
+    gens = reduce_generators(polyhedron_generators(A_ub, b_ub, A_eq, b_eq).map(T_map))
+    if gens.is_empty:
+        raise EmptyTorqueSet("the torque set (32) is empty for this direction")
+    f_rec, work = _recommended(fs, A_ub, b_ub, A_eq, b_eq, work_row, work0, w_ex, work_target)
+    return TorqueSet(
+        direction=Lr @ u,
+        u=u,
+        zeta_c=zc,
+        dq=motion[:M],
+        phi=phi,
+        nlp_status=status,
+        generators=gens,
+        tau=T_map @ f_rec,
+        f_c=f_rec,
+        work=work,
+        A_ub=A_ub,
+        b_ub=b_ub,
+        A_eq=A_eq,
+        b_eq=b_eq,
+        T_map=T_map,
+        W_map=G_eff,
+        friction=kf,
+    )
+
+
+def _recommended(
+    fs: FrictionSet, A_ub: Array, b_ub: Array, A_eq: Array, b_eq: Array, work_row: Array, work0: float,
+    w_ex: Array, work_target: float | None,
+) -> tuple[Array, float]:
+    """A member of T well inside the friction set with a definite positive work.
+
+    Target work ``w* = 0.5 (1 + |w_ex|)`` (capped at half the largest achievable work); among the
+    forces achieving it, the least total normal force ``N1`` is found, then the friction margin
+    ``s`` (distance to every facet and to ``n_f = 0`` of loaded contacts) is maximised with the
+    total normal force at most ``2 N1``.
+    """
+    L_c = A_ub.shape[1]
+    Nr = fs.N[np.any(fs.N != 0.0, axis=1)]
+    n_sum = Nr.sum(axis=0)
+    target = 0.5 * (1.0 + float(np.linalg.norm(w_ex))) if work_target is None else work_target
+    best = solve_lp(work_row, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, maximize=True)
+    if best.status == "infeasible":
+        raise EmptyTorqueSet("the torque set (32) is empty for this direction")
+    if best.status == "optimal":
+        assert best.objective is not None
+        max_work = best.objective + work0
+        if max_work <= 1e-9 * (1 + float(np.linalg.norm(w_ex))):
+            raise EmptyTorqueSet("no member of (32) does positive work in this direction")
+        target = min(target, 0.5 * max_work)
+    A_w = np.vstack([A_ub, -work_row[None, :]])
+    b_w = np.concatenate([b_ub, [work0 - target]])
+    first = solve_lp(n_sum, A_ub=A_w, b_ub=b_w, A_eq=A_eq, b_eq=b_eq)
+    if not first.found:
+        raise EmptyTorqueSet(f"no member of (32) reaches work {target:.3g} ({first.status})")
+    assert first.objective is not None and first.x is not None
+    budget = 2.0 * first.objective + 1e-9
+    m = fs.C.shape[0]
+    # variables [f, s]
+    A2 = np.vstack(
+        [
+            np.hstack([A_w, np.zeros((A_w.shape[0], 1))]),
+            np.hstack([fs.C, np.ones((m, 1))]),
+            np.hstack([-Nr, np.ones((Nr.shape[0], 1))]),
+            np.hstack([n_sum[None, :], np.zeros((1, 1))]),
+        ]
+    )
+    b2 = np.concatenate([b_w, np.zeros(m + Nr.shape[0]), [budget]])
+    A2_eq = np.hstack([A_eq, np.zeros((A_eq.shape[0], 1))])
+    second = solve_lp(np.r_[np.zeros(L_c), 1.0], A_ub=A2, b_ub=b2, A_eq=A2_eq, b_eq=b_eq, maximize=True)
+    f = second.x[:L_c] if second.found and second.x is not None else first.x
+    return f, float(work_row @ f + work0)
+
+
+@dataclass(frozen=True)
+class FrictionUncertainty:
+    """End of section IV-C: torques still realising the motion when ``mu -> nu mu``."""
+
+    nu: float
+    lambdas: Array  # (L's + 1,) [lambda_0, lambda_1..]
+    feasible: bool  # lambda_0 > 0 and lambda_i >= 0
+    tau: Array | None  # (M,) lambda_0 tau_mu + sum lambda_i tau_st_i
+    reason: str
+
+
+def friction_uncertainty(
+    system: GraspSystem, sel: Selection, st: Statics, fs: FrictionSet, ts: TorqueSet, nu: float
+) -> FrictionUncertainty:
+    """Solve the paper's ``(L's + 1)`` square system for ``lambda``.
+
+    ``tau_mu`` is the recommended member of T; ``tau_st_j`` (j = 1..L's) are stationary grasps
+    (18) that each maximise the normal force of the j-th loaded S-point (normal forces bounded
+    by the recommended member's total), ``n_sst_ij`` their normal forces at the S-points.
+    """
+    if not 0.0 <= nu <= 1.0:
+        raise ValueError("nu must lie in [0, 1]")
+    n_mu = np.array([ts.f_c[sel.c_slices[i].start] for i in sel.s_index])
+    loaded = [k for k, n in enumerate(n_mu) if n > 1e-9]
+    if not loaded:
+        return FrictionUncertainty(nu, np.array([1.0]), True, ts.tau,
+                                   "no loaded S-point: tau_mu and tau_st combine linearly")
+    Ls = len(loaded)
+    Nr = fs.N[np.any(fs.N != 0.0, axis=1)]
+    budget = float(Nr.sum(axis=0) @ ts.f_c) + 1.0
+    taus, nss = [], []
+    for k in loaded:
+        col = sel.c_slices[sel.s_index[k]].start
+        c = np.zeros(st.G_c.shape[1])
+        c[col] = 1.0
+        res = solve_lp(c, A_ub=np.vstack([fs.C, Nr.sum(axis=0)[None, :]]),
+                       b_ub=np.r_[np.zeros(fs.C.shape[0]), budget], A_eq=st.G_c, b_eq=-system.w_ex,
+                       maximize=True)
+        if not res.found or res.x is None:
+            return FrictionUncertainty(nu, np.zeros(Ls + 1), False, None, "no stationary grasp (18)")
+        taus.append(st.J_c.T @ res.x)
+        nss.append([res.x[sel.c_slices[sel.s_index[j]].start] for j in loaded])
+    n_sst = np.array(nss).T  # (Ls, Ls): [i, j] normal at S-point i induced by tau_st_j
+    Mx = np.zeros((Ls + 1, Ls + 1))
+    Mx[:Ls, 0] = (nu - 1.0) * n_mu[loaded]
+    Mx[:Ls, 1:] = nu * n_sst
+    Mx[Ls, :] = 1.0
+    rhs = np.zeros(Ls + 1)
+    rhs[-1] = 1.0
+    try:
+        lam = np.linalg.solve(Mx, rhs)
+    except np.linalg.LinAlgError:
+        return FrictionUncertainty(nu, np.zeros(Ls + 1), False, None, "the system is singular")
+    ok = bool(lam[0] > 1e-12 and np.all(lam[1:] >= -1e-12))
+    tau = lam[0] * ts.tau + sum(lam[j + 1] * taus[j] for j in range(Ls)) if ok else None
+    return FrictionUncertainty(nu, lam, ok, tau, "solved" if ok else "lambda violates lambda_0 > 0, lambda_i >= 0")
