@@ -1,0 +1,210 @@
+"""``ctp``: the command-line tool.
+
+Bad input (a malformed scene, a wrong combination string, an unparsable direction) prints one
+line naming the field and exits with code 2.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+from typing import Annotated, Any, NoReturn
+
+import numpy as np
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from analysis.exceptions import CTPError, SceneError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, help="Contact-state closure analysis and planning.")
+console = Console()
+err_console = Console(stderr=True)
+
+
+def _fail(message: str, code: int = 2) -> NoReturn:
+    err_console.print(f"[bold red]error:[/] {message}", highlight=False)
+    raise typer.Exit(code)
+
+
+def _load(scene_path: Path) -> Any:
+    from analysis.scene import load_scene
+
+    try:
+        return load_scene(scene_path)
+    except SceneError as e:
+        _fail(f"{scene_path}: {e}")
+
+
+def _parse_vector(text: str, field: str) -> np.ndarray:
+    try:
+        values = [float(v) for v in text.replace("[", "").replace("]", "").replace(",", " ").split()]
+    except ValueError:
+        _fail(f"{field}: '{text}' is not a list of numbers")
+    if not values or not np.all(np.isfinite(values)):
+        _fail(f"{field}: '{text}' must contain finite numbers")
+    return np.array(values)
+
+
+def _fmt(v: np.ndarray | None, digits: int = 3) -> str:
+    if v is None:
+        return "-"
+    return "[" + " ".join(f"{x: .{digits}f}" for x in np.asarray(v)) + "]"
+
+
+@app.command()
+def analyze(
+    scene: Annotated[Path, typer.Argument(help="scene file (.json, .yaml)")],
+    combination: Annotated[str | None, typer.Option(help="full report of one combination, e.g. FSDD")] = None,
+    direction: Annotated[str | None, typer.Option(help="object motion for the torque set, e.g. '1,0.15,-1'")] = None,
+    nu: Annotated[float | None, typer.Option(help="friction uncertainty: mu -> nu mu (0 <= nu <= 1)")] = None,
+    json_out: Annotated[Path | None, typer.Option("--json", help="write everything to this JSON file")] = None,
+    plot: Annotated[Path | None, typer.Option(help="draw the scene and DAFC directions (PNG)")] = None,
+    feasible_only: Annotated[bool, typer.Option(help="list only feasible combinations")] = False,
+    prune_modes: Annotated[bool, typer.Option(help="prune with kinematic contact modes")] = True,
+) -> None:
+    """Closure analysis: every combination (table), or the full report of one."""
+    from analysis.combination import analyze_combination
+    from analysis.contacts import build_system
+    from analysis.dafc import SEMANTICS
+
+    sc = _load(scene)
+    system = build_system(sc)
+    if nu is not None and not 0.0 <= nu <= 1.0:
+        _fail(f"nu: {nu} must lie in [0, 1]")
+    dvec = None
+    if direction is not None:
+        dvec = _parse_vector(direction, "direction")
+        if len(dvec) != sc.D:
+            _fail(f"direction: has {len(dvec)} components; the object has {sc.D} coordinates")
+    if combination is None and (direction is not None or nu is not None):
+        _fail("direction/nu: need --combination")
+    try:
+        if combination is not None:
+            report = analyze_combination(system, combination, direction=dvec, nu=nu)
+            _print_report(report, sc)
+            if json_out:
+                data = {"scene": sc.name, **report.to_json()}
+                json_out.write_text(json.dumps(data, indent=2))
+                console.print(f"wrote {json_out}")
+            if plot:
+                from analysis.plot import plot_report
+
+                plot_report(plot, sc, report)
+                console.print(f"wrote {plot}")
+            return
+        summaries = _enumerate(system, prune_modes)
+    except SceneError as e:
+        _fail(str(e))
+    except CTPError as e:
+        _fail(str(e), code=1)
+    rows = [s for s in summaries if s.feasible] if feasible_only or len(summaries) > 729 else summaries
+    table = Table(title=f"{sc.name}: {sum(s.feasible for s in summaries)} of {len(summaries)} combinations feasible")
+    for col in ("combination", "feasible", "dim DAFC", "dim DPFC", "example direction", "note"):
+        table.add_column(col)
+    for s in rows:
+        table.add_row(s.combination, "yes" if s.feasible else "no", str(s.dim_dafc), str(s.dim_dpfc),
+                      _fmt(s.example_direction, 2), ("" if s.exact else "sampled; ") + (
+                          "" if s.feasible else s.reason))
+    console.print(table)
+    if len(rows) < len(summaries):
+        console.print(f"(showing feasible combinations only; {len(summaries)} in --json)")
+    if json_out:
+        data = {"scene": sc.name, "semantics": SEMANTICS, "combinations": [s.to_json() for s in summaries]}
+        json_out.write_text(json.dumps(data, indent=2))
+        console.print(f"wrote {json_out}")
+    if plot:
+        from analysis.plot import plot_report
+
+        first = next((s for s in summaries if s.feasible), None)
+        rep = analyze_combination(system, first.combination) if first else None
+        plot_report(plot, sc, rep)
+        console.print(f"wrote {plot}")
+
+
+def _enumerate(system: Any, prune_modes: bool) -> list[Any]:
+    from analysis.enumerate import enumerate_combinations
+
+    admissible = None
+    if prune_modes:
+        try:
+            from analysis.modes import combination_admissible, enumerate_modes
+        except ImportError:  # pragma: no cover - modes module optional during development
+            admissible = None
+        else:
+            modes = enumerate_modes(system)
+            admissible = lambda c: combination_admissible(modes, c)  # noqa: E731
+    with Progress(TextColumn("combinations"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=err_console, transient=True, disable=not sys.stderr.isatty()) as bar:
+        task = bar.add_task("enumerate", total=None)
+
+        def progress(k: int, n: int) -> None:
+            bar.update(task, completed=k, total=n)
+
+        summaries, _ = enumerate_combinations(system, admissible=admissible, progress=progress)
+    return summaries
+
+
+def _print_report(report: Any, sc: Any) -> None:
+    s = report.summary
+    console.print(f"[bold]{sc.name}[/] combination [bold]{s.combination}[/]: "
+                  f"{'feasible' if s.feasible else 'not feasible'} ({s.reason})")
+    ms = report.parts.ms
+    console.print(f"  motion space a = {ms.a}, object part a~ = {ms.a_bar}, redundancy {ms.n_redundant}; "
+                  f"p = rank(G_c Gamma) = {report.parts.st.p}")
+    if report.stationary is not None:
+        g = report.stationary
+        console.print(f"  stationary grasp (18, most interior): tau_st = {_fmt(g.tau)}  margin {g.margin:.3g}")
+        console.print(f"  minimum grip: tau_st = {_fmt(report.stationary_min_grip.tau)}  "
+                      f"total normal {report.stationary_min_grip.total_normal:.3g}")
+    if report.dafc is not None:
+        d = report.dafc
+        console.print(f"  DAFC (22): dim {d.dim}, {int(d.member.sum())} of {len(d.member)} sampled directions, "
+                      f"{'exact' if d.exact else 'sampled'}; example {_fmt(s.example_direction)}")
+    if report.dpfc is not None:
+        console.print(f"  DPFC (28): dim {report.dpfc.dim}, {len(report.dpfc.vertices)} vertices, "
+                      f"{len(report.dpfc.rays)} rays")
+    if report.direction_test is not None:
+        t = report.direction_test
+        console.print(f"  direction {_fmt(t.direction)}: {'in DAFC' if t.member else 'not in DAFC'} ({t.reason})")
+    if report.torque is not None:
+        ts = report.torque
+        console.print(f"  torque set T (32) for {_fmt(ts.direction)}: {len(ts.vertices)} vertices, "
+                      f"{len(ts.rays)} rays; phi = |dq| = {ts.phi:.3g} ({ts.nlp_status})")
+        for v in ts.vertices:
+            console.print(f"    vertex {_fmt(v)}")
+        for r in ts.rays:
+            console.print(f"    ray    {_fmt(r)}")
+        console.print(f"  recommended tau = {_fmt(ts.tau)} (work {ts.work:.3g})")
+    if report.torque_error:
+        console.print(f"  torque set: {report.torque_error}")
+    if report.uncertainty is not None:
+        u = report.uncertainty
+        console.print(f"  friction uncertainty nu = {u.nu}: {u.reason}; lambda = {_fmt(u.lambdas)}")
+    if report.regrasp is not None:
+        rg = report.regrasp
+        console.print(f"  regrasp cone (33): {len(rg.rays)} rays, {len(rg.lines)} lines "
+                      f"({'exact' if rg.exact else 'S-points checked per generator'})")
+
+
+@app.command()
+def schema(out: Annotated[Path | None, typer.Option(help="write to a file instead of stdout")] = None) -> None:
+    """Print the JSON Schema of the scene format."""
+    from analysis.scene import scene_json_schema
+
+    text = json.dumps(scene_json_schema(), indent=2)
+    if out:
+        out.write_text(text)
+        console.print(f"wrote {out}")
+    else:
+        sys.stdout.write(text + "\n")
+
+
+def main() -> None:  # pragma: no cover
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
