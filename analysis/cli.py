@@ -171,12 +171,17 @@ def _print_report(report: Any, sc: Any) -> None:
         console.print(f"  direction {_fmt(t.direction)}: {'in DAFC' if t.member else 'not in DAFC'} ({t.reason})")
     if report.torque is not None:
         ts = report.torque
-        console.print(f"  torque set T (32) for {_fmt(ts.direction)}: {len(ts.vertices)} vertices, "
-                      f"{len(ts.rays)} rays; phi = |dq| = {ts.phi:.3g} ({ts.nlp_status})")
-        for v in ts.vertices:
-            console.print(f"    vertex {_fmt(v)}")
-        for r in ts.rays:
-            console.print(f"    ray    {_fmt(r)}")
+        if ts.vertices is None or ts.rays is None:
+            console.print(f"  torque set T (32) for {_fmt(ts.direction)}: force polyhedron of dimension {ts.dim_P}, "
+                          "too large to enumerate (H-representation in --json); "
+                          f"phi = |dq| = {ts.phi:.3g} ({ts.nlp_status})")
+        else:
+            console.print(f"  torque set T (32) for {_fmt(ts.direction)}: {len(ts.vertices)} vertices, "
+                          f"{len(ts.rays)} rays; phi = |dq| = {ts.phi:.3g} ({ts.nlp_status})")
+            for v in ts.vertices:
+                console.print(f"    vertex {_fmt(v)}")
+            for r in ts.rays:
+                console.print(f"    ray    {_fmt(r)}")
         console.print(f"  recommended tau = {_fmt(ts.tau)} (work {ts.work:.3g})")
     if report.torque_error:
         console.print(f"  torque set: {report.torque_error}")

@@ -149,9 +149,12 @@ class CombinationReport:
                 "dq": _list(ts.dq),
                 "phi": ts.phi,
                 "nlp_status": ts.nlp_status,
-                "vertices": _list(ts.vertices),
-                "rays": _list(ts.generators.rays),
-                "lines": _list(ts.generators.lines),
+                "vertices": None if ts.generators is None else _list(ts.generators.vertices),
+                "rays": None if ts.generators is None else _list(ts.generators.rays),
+                "lines": None if ts.generators is None else _list(ts.generators.lines),
+                "enumerated": ts.generators is not None,
+                "force_polyhedron": {"dim": ts.dim_P, "A_ub": _list(ts.A_ub), "b_ub": _list(ts.b_ub),
+                                     "A_eq": _list(ts.A_eq), "b_eq": _list(ts.b_eq), "tau_map": _list(ts.T_map)},
                 "recommended": _list(ts.tau),
                 "contact_forces": _list(ts.f_c),
                 "work": ts.work,
@@ -177,6 +180,34 @@ def _grasp_json(g: StationaryGrasp) -> dict[str, Any]:
 
 def _list(a: Array) -> Any:
     return np.round(np.asarray(a, dtype=float), 12).tolist()
+
+
+def _realisable_candidates(
+    parts: CombinationParts, oracle: DAFCOracle, target: Array, dset: DAFCSet | None, limit: int = 6
+) -> list[Array]:
+    """Directions to try for the default torque set when the example direction has none.
+
+    A DAFC direction only guarantees positive work; T also needs the net wrench in the motion
+    space parallel to the motion (W_3 of eq. 30). The net wrench of the oracle's maximising
+    forces is such a direction for the same contact forces, so it is tried first, then the
+    sampled DAFC members in order of work.
+    """
+    out: list[Array] = []
+    t = oracle.test(target)
+    if t.member and t.forces is not None and t.zeta_c is not None:
+        W = parts.st.G_c
+        if parts.sel.s_index:
+            from analysis.friction import kinetic_friction
+
+            W = W + kinetic_friction(parts.system, parts.sel, oracle.slips_of(t.zeta_c)).G_w
+        w = W @ t.forces + parts.system.w_ex
+        k = parts.ms.Lambda_r_t @ (parts.ms.Lambda_r_t.T @ w)
+        if np.linalg.norm(k) > 1e-9:
+            out.append(k / np.linalg.norm(k))
+    if dset is not None:
+        order = np.argsort(-np.where(np.isfinite(dset.work), dset.work, 1e300))
+        out.extend(dset.directions[j] for j in order if dset.member[j])
+    return out[:limit]
 
 
 def analyze_combination(
@@ -211,10 +242,16 @@ def analyze_combination(
     elif summary.example_direction is not None:
         target = summary.example_direction
     if grasp is not None and target is not None:
-        try:
-            torque = torque_set(sy, sel, ms, st, fs, grasp, target, oracle=oracle)
-        except CTPError as e:
-            err = str(e)
+        candidates = [target]
+        if direction is None:
+            candidates += _realisable_candidates(parts, oracle, target, dset)
+        for cand in candidates:
+            try:
+                torque = torque_set(sy, sel, ms, st, fs, grasp, cand, oracle=oracle)
+                err = None
+                break
+            except CTPError as e:
+                err = err or str(e)
     elif target is not None:
         err = "no stationary grasp (18): the torque set is not defined"
     if torque is not None and nu is not None:

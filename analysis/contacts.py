@@ -10,6 +10,7 @@ D about to detach) to get ``H_c, H_s, H_d`` and ``A_c = H_c A``, ``A_s = H_s A``
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -115,6 +116,28 @@ class GraspSystem:
     def contact_A(self, i: int) -> Array:
         """Rows of ``A`` of contact ``i``: ``(d, M + D)``."""
         return np.hstack([self.J_blocks[i], -self.G_blocks[i].T])
+
+    @cached_property
+    def pyramid(self) -> tuple[Array, Array]:
+        """Per contact, the unit-free facet normals ``(L, k', d)`` and generators ``(L, k', d)`` of
+        its friction cone (2-D: the two edges, exact; 3-D: the inscribed ``k``-sided pyramid),
+        see :mod:`analysis.friction`. Computed once per configuration."""
+        L, d, k = self.L, self.d, self.friction_sides
+        kk = 2 if d == 2 else k
+        facets = np.zeros((L, kk, d))
+        gens = np.zeros((L, kk, d))
+        for i in range(L):
+            n, T, mu = self.normals[i], self.tangents[i], self.mu[i]
+            if d == 2:
+                facets[i] = [T[0] - mu * n, -T[0] - mu * n]
+                gens[i] = [n + mu * T[0], n - mu * T[0]]
+            else:
+                psi = (2 * np.arange(k) + 1) * np.pi / k
+                phi = 2 * np.arange(k) * np.pi / k
+                c = np.cos(np.pi / k)
+                facets[i] = np.cos(psi)[:, None] * T[0] + np.sin(psi)[:, None] * T[1] - mu * c * n
+                gens[i] = n + mu * (np.cos(phi)[:, None] * T[0] + np.sin(phi)[:, None] * T[1])
+        return facets, gens
 
     def frictional(self) -> NDArray[np.bool_]:
         return self.mu > 0.0

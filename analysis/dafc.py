@@ -89,6 +89,7 @@ class DAFCOracle:
         self.exact = not self.slip_depends_on_redundancy
         self._lp: LPModel | None = None
         self._relaxed: LPModel | None = None
+        self._slp: LPModel | None = None
         self._G_relaxed = np.zeros((system.D, 0))
         self._d = d
         self.lp_count = 0
@@ -104,8 +105,10 @@ class DAFCOracle:
         if self.B.shape[0] == 0:
             return np.zeros(nr)
         tol = ALLOW_TOL * max(1.0, float(np.linalg.norm(u)))
+        if np.all(rhs >= -tol):
+            return np.zeros(nr)  # zero redundancy is allowable: the least-L1 choice
         if nr == 0 or not np.any(B_r):
-            return np.zeros(nr) if np.all(rhs >= -tol) else None
+            return None
         # z = [z+ ; z-] >= 0, zeta = z+ - z-, minimise sum(z)
         A_ub = np.hstack([B_r, -B_r])
         res = solve_lp(np.ones(2 * nr), A_ub=A_ub, b_ub=rhs + tol, lb=0.0)
@@ -184,23 +187,37 @@ class DAFCOracle:
             )
         return self._lp
 
+    def _s_model(self) -> LPModel:
+        """One LP for every motion of an S combination: only the S columns of the equality
+        rows ``Xi^T G_eff`` change with the slips, and are overwritten in place (warm start)."""
+        if self._slp is None:
+            st, fs = self.st, self.fs
+            self._slp = LPModel(
+                st.G_c.shape[1],
+                A_ub=fs.C,
+                b_ub=np.zeros(fs.C.shape[0]),
+                A_eq=self.Xi.T @ st.G_c,  # S columns are overwritten per motion (changeCoeff inserts)
+                b_eq=-(self.Xi.T @ self.system.w_ex),
+            )
+        return self._slp
+
     def work_sup(self, dr: Array, zeta_c: Array) -> tuple[float, Array | None]:
         """``sup dr^T (G_c f + w_s + w_ex)`` over the admissible forces for the motion ``zeta_c``."""
-        st, fs = self.st, self.fs
+        st = self.st
         w_ex = self.system.w_ex
+        if st.G_c.shape[1] == 0:  # no contact carries force (all D): only w_ex can do work
+            return float(dr @ w_ex), np.zeros(0)
         if not self.sel.s_index:
             model = self._fixed_lp()
             G_eff = st.G_c
         else:
             kf = kinetic_friction(self.system, self.sel, self.slips_of(zeta_c))
             G_eff = st.G_c + kf.G_w
-            model = LPModel(
-                G_eff.shape[1],
-                A_ub=fs.C,
-                b_ub=np.zeros(fs.C.shape[0]),
-                A_eq=self.Xi.T @ G_eff,
-                b_eq=-(self.Xi.T @ w_ex),
-            )
+            model = self._s_model()
+            s_cols = np.array([self.sel.c_slices[i].start for i in self.sel.s_index])
+            E = self.Xi.T @ G_eff[:, s_cols]  # (p, #S)
+            rows, cols = np.indices(E.shape)
+            model.change_coefficients(rows.ravel() + model.n_ub, s_cols[cols.ravel()], E.ravel())
         if G_eff.shape[1] == 0:
             return float(dr @ w_ex), np.zeros(0)
         res = model.solve(G_eff.T @ dr, maximize=True)
@@ -214,8 +231,12 @@ class DAFCOracle:
 
     # -- membership -----------------------------------------------------------------------------
 
-    def test(self, dr: Array, zeta_r: Array | None = None) -> DirectionTest:
-        """Is the object direction ``dr`` (any scale, in the motion space) in DAFC?"""
+    def test(self, dr: Array, zeta_r: Array | None = None, screen: bool = True) -> DirectionTest:
+        """Is the object direction ``dr`` (any scale, in the motion space) in DAFC?
+
+        ``screen``: with S-points, first try to prove non-membership with the relaxation
+        (:meth:`relaxed_work_sup`), which is exact when it says no.
+        """
         ms = self.ms
         dr = np.asarray(dr, dtype=float)
         u = ms.coordinates(dr)
@@ -227,7 +248,7 @@ class DAFCOracle:
         u = u / nu
         dr = ms.Lambda_r_t @ u
         scale = 1.0 + float(np.linalg.norm(self.system.w_ex))
-        if self.sel.s_index and zeta_r is None and self.relaxed_work_sup(dr) <= WORK_TOL * scale:
+        if screen and self.sel.s_index and zeta_r is None and self.relaxed_work_sup(dr) <= WORK_TOL * scale:
             return DirectionTest(dr, u, None, False, np.nan,
                                  "the fingers cannot do positive work, whatever the S-points' slip", True)
         candidates: list[Array] = []
@@ -238,9 +259,13 @@ class DAFCOracle:
             if z0 is None:
                 return DirectionTest(dr, u, None, False, np.nan, "not allowable: a D-point would penetrate",
                                      True)
-            candidates.append(z0)
             if self.slip_depends_on_redundancy:
-                candidates.extend(self._alternative_redundancies(u, z0))
+                alts = self._alternative_redundancies(u, z0)
+                candidates.extend(alts[:1])
+                candidates.append(z0)
+                candidates.extend(alts[1:])
+            else:
+                candidates.append(z0)
         last: DirectionTest | None = None
         for zr in candidates:
             zc = ms.zeta_c(u, zr)
@@ -383,29 +408,35 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
             if t.member:
                 return t, cone_dim, True
         return None, 0, True
-    # (1) relaxation: exact emptiness certificate
-    scale = 1.0 + float(np.linalg.norm(oracle.system.w_ex))
-    positive = [u for u in generators if oracle.relaxed_work_sup(ms.Lambda_r_t @ u) > WORK_TOL * scale]
-    if not positive:
-        return None, 0, True
-    # (2) interior samples, then generators
+    # (0) the centroid of the cone, the likeliest member
     rng = np.random.default_rng(1)
     interior: list[Array] = []
     centroid = dirs.sum(axis=0)
     if np.linalg.norm(centroid) > 1e-9:
         interior.append(centroid / np.linalg.norm(centroid))
+    for u in interior:
+        t = oracle.test(ms.Lambda_r_t @ u, screen=False)
+        if t.member:
+            return t, cone_dim, False
+    # (1) relaxation: exact emptiness certificate
+    scale = 1.0 + float(np.linalg.norm(oracle.system.w_ex))
+    positive = [u for u in generators if oracle.relaxed_work_sup(ms.Lambda_r_t @ u) > WORK_TOL * scale]
+    if not positive:
+        return None, 0, True
+    # (2) more interior samples, then the generators with positive relaxed work
+    interior = []
     for _ in range(extra_samples):
         v = rng.random(len(dirs)) @ dirs
         if np.linalg.norm(v) > 1e-9:
             interior.append(v / np.linalg.norm(v))
-    members: list[Array] = []
-    best: DirectionTest | None = None
     for u in interior:
         t = oracle.test(ms.Lambda_r_t @ u)
         if t.member:
             return t, cone_dim, False
+    members: list[Array] = []
+    best: DirectionTest | None = None
     for u in positive:
-        t = oracle.test(ms.Lambda_r_t @ u)
+        t = oracle.test(ms.Lambda_r_t @ u, screen=False)
         if t.member:
             members.append(t.u)
             best = best or t

@@ -15,6 +15,7 @@ Pruning, all exact:
 from __future__ import annotations
 
 import itertools
+import os
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
@@ -82,19 +83,73 @@ def _order(combos: Iterable[str]) -> list[str]:
     return sorted(combos, key=lambda c: -sum(_CLASS[s] for s in c))
 
 
+#: Enumerations larger than this are split over worker processes (when ``workers`` > 1).
+PARALLEL_THRESHOLD = 2000
+
+_WORKER: dict[str, object] = {}
+
+
+def _worker_init(system: GraspSystem, admissible: Callable[[str], bool] | None) -> None:
+    _WORKER["system"] = system
+    _WORKER["admissible"] = admissible
+
+
+def _worker_run(chunk: list[str]) -> tuple[list[CombinationSummary], EnumerationStats]:
+    system = _WORKER["system"]
+    assert isinstance(system, GraspSystem)
+    adm = _WORKER["admissible"]
+    return _enumerate_serial(system, chunk, adm if callable(adm) else None, None)
+
+
 def enumerate_combinations(
     system: GraspSystem,
     combinations: Iterable[str] | None = None,
     admissible: Callable[[str], bool] | None = None,
     progress: Callable[[int, int], None] | None = None,
+    workers: int | None = None,
 ) -> tuple[list[CombinationSummary], EnumerationStats]:
     """Summaries of every combination (scene order of letters), strongest-first evaluation.
 
     ``admissible`` (e.g. from the contact modes) may veto combinations no motion realises.
     Results are returned in the canonical product order (F/S/D or N/D per contact).
+    ``workers``: processes for large enumerations (default: all cores above
+    ``PARALLEL_THRESHOLD`` combinations, else 1); each worker keeps its own pruning memory.
     """
     letters = ["FSD" if m > 0 else "ND" for m in system.mu]
     canonical = ["".join(p) for p in itertools.product(*letters)] if combinations is None else list(combinations)
+    if workers is None:
+        workers = (os.cpu_count() or 1) if len(canonical) > PARALLEL_THRESHOLD else 1
+    if workers <= 1:
+        return _enumerate_serial(system, canonical, admissible, progress)
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    ordered = _order(canonical)
+    n_chunks = max(workers * 2, 1)
+    chunks = [ordered[k::n_chunks] for k in range(n_chunks)]  # interleaved: similar strength mix
+    stats = EnumerationStats(combinations=len(canonical))
+    results: dict[str, CombinationSummary] = {}
+    done = 0
+    ctx = mp.get_context("fork")
+    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
+                             initargs=(system, admissible)) as pool:
+        for summaries, st in pool.map(_worker_run, chunks):
+            for sm in summaries:
+                results[sm.combination] = sm
+            for f in ("pruned_motion", "pruned_stationary", "pruned_modes", "stationary_lps", "dafc_lps"):
+                setattr(stats, f, getattr(stats, f) + getattr(st, f))
+            done += len(summaries)
+            if progress is not None:
+                progress(done, len(canonical))
+    return [results[c] for c in canonical], stats
+
+
+def _enumerate_serial(
+    system: GraspSystem,
+    canonical: list[str],
+    admissible: Callable[[str], bool] | None,
+    progress: Callable[[int, int], None] | None,
+) -> tuple[list[CombinationSummary], EnumerationStats]:
     stats = EnumerationStats(combinations=len(canonical))
     cache = _StationaryCache(system.L)
     results: dict[str, CombinationSummary] = {}

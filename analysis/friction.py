@@ -58,19 +58,22 @@ def friction_set(system: GraspSystem, sel: Selection, mu_scale: float = 1.0) -> 
         mu = mu_scale * system.mu[i]
         if s == "F":
             N[i, sl] = n
-            T = system.tangents[i]  # (d-1, d)
-            if d == 2:
-                facets = [T[0] - mu * n, -T[0] - mu * n]
-                gdirs = [n + mu * T[0], n - mu * T[0]]
+            if mu_scale == 1.0:
+                facets, gdirs = system.pyramid[0][i], system.pyramid[1][i]
             else:
-                psi = (2 * np.arange(k) + 1) * np.pi / k
-                phi = 2 * np.arange(k) * np.pi / k
-                c = np.cos(np.pi / k)
-                facets = [np.cos(a) * T[0] + np.sin(a) * T[1] - mu * c * n for a in psi]
-                gdirs = [n + mu * (np.cos(a) * T[0] + np.sin(a) * T[1]) for a in phi]
+                T = system.tangents[i]  # (d-1, d)
+                if d == 2:
+                    facets = np.array([T[0] - mu * n, -T[0] - mu * n])
+                    gdirs = np.array([n + mu * T[0], n - mu * T[0]])
+                else:
+                    psi = (2 * np.arange(k) + 1) * np.pi / k
+                    phi = 2 * np.arange(k) * np.pi / k
+                    c = np.cos(np.pi / k)
+                    facets = np.cos(psi)[:, None] * T[0] + np.sin(psi)[:, None] * T[1] - mu * c * n
+                    gdirs = n + mu * (np.cos(phi)[:, None] * T[0] + np.sin(phi)[:, None] * T[1])
             if mu == 0.0:
-                facets = [-n]
-                gdirs = [n]
+                facets = -n[None, :]
+                gdirs = n[None, :]
                 # a frictional contact at nu = 0 keeps the tangential force zero
                 for t in system.tangents[i]:
                     for sign in (1.0, -1.0):

@@ -25,16 +25,21 @@ import numpy as np
 
 from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
-from analysis.dafc import DAFCOracle
+from analysis.dafc import DAFCOracle, DirectionTest
 from analysis.exceptions import EmptyTorqueSet, NotInDAFC
 from analysis.friction import FrictionSet, KineticFriction, kinetic_friction
-from analysis.linalg import null_space
+from analysis.linalg import null_space, rank
 from analysis.motion import MotionSpace
 from analysis.solvers.casadi_nlp import RedundancyNLP, solve_redundancy
 from analysis.solvers.cdd import Generators, polyhedron_generators, reduce_generators
 from analysis.solvers.highs import solve_lp
 from analysis.statics import Statics
 from analysis.stationary import StationaryGrasp
+
+#: Vertex enumeration of the force polyhedron behind T is attempted up to this dimension; above
+#: it (e.g. several 3-D F-points with 16-sided pyramids: up to k^#F vertices) T is reported by
+#: its H-representation in contact-force space and the linear map to joint torques.
+MAX_ENUMERATION_DIM = 7
 
 
 @dataclass(frozen=True)
@@ -47,7 +52,8 @@ class TorqueSet:
     dq: Array  # (M,) finger motion for the unit object motion
     phi: float  # |dq|
     nlp_status: str
-    generators: Generators  # vertices and rays of T (joint space, M)
+    generators: Generators | None  # vertices and rays of T (joint space, M); None if too large
+    dim_P: int  # dimension of the force polyhedron P behind T
     tau: Array  # (M,) the recommended member
     f_c: Array  # (L_c,) its contact forces
     work: float  # u^T Lambda~_r^T w of the recommended member (> 0)
@@ -61,12 +67,12 @@ class TorqueSet:
     friction: KineticFriction | None
 
     @property
-    def vertices(self) -> Array:
-        return self.generators.vertices
+    def vertices(self) -> Array | None:
+        return None if self.generators is None else self.generators.vertices
 
     @property
-    def rays(self) -> Array:
-        return self.generators.all_directions()
+    def rays(self) -> Array | None:
+        return None if self.generators is None else self.generators.all_directions()
 
     def residuals(self, f_c: Array) -> dict[str, float]:
         """Certificate of a member: inequality violation, equality residual, work."""
@@ -79,7 +85,7 @@ class TorqueSet:
 
 def _chosen_motion(
     oracle: DAFCOracle, system: GraspSystem, sel: Selection, ms: MotionSpace, st: Statics, fs: FrictionSet,
-    u: Array,
+    u: Array, start: DirectionTest | None = None,
 ) -> tuple[Array, str, float]:
     """Problem (31): the redundancy minimising phi; returns (zeta_c, IPOPT status, phi)."""
     r = ms.n_redundant
@@ -108,6 +114,9 @@ def _chosen_motion(
     )
     z0 = oracle.redundancy_for(u)
     res = solve_redundancy(p, zeta0=z0)
+    if not res.found and start is not None and start.zeta_c is not None:
+        # restart from the DAFC oracle's certificate: a motion and forces with positive work
+        res = solve_redundancy(p, zeta0=start.zeta_c[a_bar:], f0=start.forces)
     if not res.found:
         if z0 is not None and not oracle.slip_depends_on_redundancy:
             # the QP is feasible at z0; IPOPT failing to certify it is a solver problem
@@ -134,7 +143,7 @@ def torque_set(
     if not test.member:
         raise NotInDAFC(f"direction {np.round(direction, 4).tolist()} is not in DAFC: {test.reason}")
     u = test.u
-    zc, status, phi = _chosen_motion(oracle, system, sel, ms, st, fs, u)
+    zc, status, phi = _chosen_motion(oracle, system, sel, ms, st, fs, u, start=test)
     motion = ms.Phi_full @ zc  # (M + D,)
     M = system.M
     kf: KineticFriction | None = None
@@ -159,10 +168,13 @@ def torque_set(
     work0 = float(u @ Lr.T @ w_ex)
     A_ub = np.vstack([fs.C, -work_row[None, :]])
     b_ub = np.concatenate([np.zeros(fs.C.shape[0]), [work0]])
-    gens = reduce_generators(polyhedron_generators(A_ub, b_ub, A_eq, b_eq).map(T_map))
-    if gens.is_empty:
-        raise EmptyTorqueSet("the torque set (32) is empty for this direction")
     f_rec, work = _recommended(fs, A_ub, b_ub, A_eq, b_eq, work_row, work0, w_ex, work_target)
+    dim_P = L_c - (rank(A_eq) if A_eq.size else 0)
+    gens: Generators | None = None
+    if dim_P <= MAX_ENUMERATION_DIM:
+        gens = reduce_generators(polyhedron_generators(A_ub, b_ub, A_eq, b_eq).map(T_map))
+        if gens.is_empty:
+            raise EmptyTorqueSet("the torque set (32) is empty for this direction")
     return TorqueSet(
         direction=Lr @ u,
         u=u,
@@ -171,6 +183,7 @@ def torque_set(
         phi=phi,
         nlp_status=status,
         generators=gens,
+        dim_P=dim_P,
         tau=T_map @ f_rec,
         f_c=f_rec,
         work=work,

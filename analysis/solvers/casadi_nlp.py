@@ -61,8 +61,10 @@ class RedundancyResult:
     phi: float
 
 
-def solve_redundancy(p: RedundancyNLP, zeta0: Array | None = None, max_iter: int = 300) -> RedundancyResult:
-    """Solve (31) with IPOPT from ``zeta0`` (default: zero redundancy)."""
+def solve_redundancy(
+    p: RedundancyNLP, zeta0: Array | None = None, f0: Array | None = None, max_iter: int = 300
+) -> RedundancyResult:
+    """Solve (31) with IPOPT from ``zeta0`` (default: zero redundancy) and forces ``f0``."""
     r = p.Lambda_qr_t.shape[1]
     L_c = p.C.shape[1]
     a_bar = p.u.shape[0]
@@ -124,7 +126,7 @@ def solve_redundancy(p: RedundancyNLP, zeta0: Array | None = None, max_iter: int
         if zeta0 is not None:
             x0[:nz] = zeta0
         if p.with_forces:
-            x0[nz:] = 1.0 if L_c else 0.0
+            x0[nz:] = f0 if f0 is not None and np.all(np.isfinite(f0)) else 1.0
         sol = solver(x0=x0, lbg=np.array(lbg), ubg=np.array(ubg))
     except RuntimeError as e:
         raise SolverError("IPOPT", str(e)) from e

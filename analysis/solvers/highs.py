@@ -65,6 +65,7 @@ class LPModel:
         if not (np.all(np.isfinite(b_ub)) and np.all(np.isfinite(b_eq))):
             raise SolverError("HiGHS", "constraint bounds have non-finite entries")
         self.A = np.vstack([A_ub, A_eq])  # (m, n)
+        self._n_ub = A_ub.shape[0]
         lp = highspy.HighsLp()
         lp.num_col_ = n
         lp.num_row_ = self.A.shape[0]
@@ -80,12 +81,24 @@ class LPModel:
         lp.a_matrix_.value_ = value
         self._h = highspy.Highs()
         self._h.setOptionValue("output_flag", False)
+        self._h.setOptionValue("presolve", "off")
+        self._h.setOptionValue("simplex_strategy", 4)
         if time_limit is not None:
             self._h.setOptionValue("time_limit", float(time_limit))
         status = self._h.passModel(lp)
         if status == highspy.HighsStatus.kError:
             raise SolverError("HiGHS", "model could not be loaded")
         self._idx = np.arange(n, dtype=np.int32)
+
+    @property
+    def n_ub(self) -> int:
+        """Number of inequality rows (equality rows follow them)."""
+        return self._n_ub
+
+    def change_coefficients(self, rows: Array, cols: Array, values: Array) -> None:
+        """Overwrite entries of the constraint matrix (rows index ``[A_ub; A_eq]``)."""
+        for r, c, v in zip(np.ravel(rows), np.ravel(cols), np.ravel(values), strict=True):
+            self._h.changeCoeff(int(r), int(c), float(v))
 
     def solve(self, c: Array, maximize: bool = False) -> LPResult:
         c = np.asarray(c, dtype=float).ravel()

@@ -1,0 +1,106 @@
+"""Speed of the closure analysis (issue: analysis core). Prints figures and the machine.
+
+    .venv/bin/python benchmarks/analysis.py            # all figures
+    .venv/bin/python benchmarks/analysis.py --quick    # skip the 3^9 enumeration
+
+Figures: enumeration of all 3^L combinations (feasibility + DAFC dimension) of the example
+scenes, on one core and with worker processes; the full report of one combination; and the
+scaling with the number of contacts (the wrap scene restricted to its first L contacts).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from analysis.combination import analyze_combination  # noqa: E402
+from analysis.contacts import build_system  # noqa: E402
+from analysis.enumerate import enumerate_combinations  # noqa: E402
+from analysis.scene import load_scene, scene_from_dict  # noqa: E402
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return (f"{platform.system()} {platform.release()}, {cpu}, {os.cpu_count()} cores, "
+            f"Python {platform.python_version()}")
+
+
+def time_enum(name: str, workers: int, repeat: int = 1) -> tuple[float, int, int]:
+    sy = build_system(load_scene(ROOT / "examples" / f"{name}.json"))
+    times = []
+    feas = n = 0
+    for _ in range(repeat):
+        t = time.perf_counter()
+        res, _ = enumerate_combinations(sy, workers=workers)
+        times.append(time.perf_counter() - t)
+        feas, n = sum(r.feasible for r in res), len(res)
+    return min(times), feas, n
+
+
+def time_report(name: str, combination: str, repeat: int = 5) -> float:
+    sy = build_system(load_scene(ROOT / "examples" / f"{name}.json"))
+    analyze_combination(sy, combination)  # warm-up (imports, CasADi)
+    times = []
+    for _ in range(repeat):
+        t = time.perf_counter()
+        analyze_combination(sy, combination)
+        times.append(time.perf_counter() - t)
+    return statistics.median(times)
+
+
+def scaling(max_L: int) -> list[tuple[int, int, float, int]]:
+    import json
+
+    data = json.loads((ROOT / "examples" / "sphere_four_finger_wrap.json").read_text())
+    # keep the palm (last contact) and the first L-1 finger contacts
+    rows = []
+    for L in range(3, max_L + 1):
+        d = dict(data)
+        d["contacts"] = data["contacts"][: L - 1] + data["contacts"][-1:]
+        sy = build_system(scene_from_dict(d))
+        t = time.perf_counter()
+        res, _ = enumerate_combinations(sy, workers=1)
+        rows.append((L, len(res), time.perf_counter() - t, sum(r.feasible for r in res)))
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true", help="skip the 19,683-combination enumeration")
+    args = ap.parse_args()
+    print(f"machine: {machine()}")
+    t, f, n = time_enum("planar_disk_envelope", workers=1, repeat=3)
+    print(f"planar_disk_envelope: all {n} combinations, one core: {t:.2f} s ({f} feasible)")
+    t, f, n = time_enum("sphere_four_finger_palm", workers=1, repeat=3)
+    print(f"sphere_four_finger_palm: all {n} combinations, one core: {t:.2f} s ({f} feasible)  [target < 2 s]")
+    t = time_report("sphere_four_finger_palm", "FSFSF")
+    print(f"sphere_four_finger_palm FSFSF full report: {t:.3f} s  [target < 0.2 s]")
+    t = time_report("planar_disk_envelope", "FDFDD")
+    print(f"planar_disk_envelope FDFDD full report: {t:.3f} s")
+    print("scaling with the number of contacts (wrap scene, first L-1 finger contacts + palm, one core):")
+    for L, n, t, f in scaling(7 if args.quick else 8):
+        print(f"  L = {L}: {n:5d} combinations  {t:7.2f} s  {1e3 * t / n:6.2f} ms/combination  ({f} feasible)")
+    if not args.quick:
+        cores = os.cpu_count() or 1
+        t, f, n = time_enum("sphere_four_finger_wrap", workers=cores)
+        print(f"sphere_four_finger_wrap: all {n} combinations, {cores} processes: {t:.1f} s ({f} feasible)"
+              "  [target < 60 s]")
+
+
+if __name__ == "__main__":
+    main()
