@@ -134,7 +134,7 @@ def _enumerate(system: Any, prune_modes: bool) -> list[Any]:
         except ImportError:  # pragma: no cover - modes module optional during development
             admissible = None
         else:
-            modes = enumerate_modes(system)
+            modes = enumerate_modes(system, refine=False)
             admissible = lambda c: combination_admissible(modes, c)  # noqa: E731
     with Progress(TextColumn("combinations"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=err_console, transient=True, disable=not sys.stderr.isatty()) as bar:
@@ -192,6 +192,90 @@ def _print_report(report: Any, sc: Any) -> None:
         rg = report.regrasp
         console.print(f"  regrasp cone (33): {len(rg.rays)} rays, {len(rg.lines)} lines "
                       f"({'exact' if rg.exact else 'S-points checked per generator'})")
+
+
+@app.command()
+def modes(
+    scene: Annotated[Path, typer.Argument(help="scene file (.json, .yaml)")],
+    json_out: Annotated[Path | None, typer.Option("--json", help="write the modes to this JSON file")] = None,
+    tangent_planes: Annotated[int, typer.Option(help="3-D: tangent hyperplanes that label sliding")] = 2,
+    max_modes: Annotated[int, typer.Option(help="stop listing sticking/sliding modes after this many")] = 200_000,
+) -> None:
+    """Kinematic contact modes (contacting/separating and sticking/sliding) that some motion realises."""
+    from analysis.contacts import build_system
+    from analysis.modes import enumerate_modes
+
+    sc = _load(scene)
+    if tangent_planes < 2:
+        _fail(f"tangent-planes: {tangent_planes} must be at least 2")
+    try:
+        e = enumerate_modes(build_system(sc), tangent_planes=tangent_planes, max_modes=max_modes)
+    except CTPError as err:
+        _fail(str(err), code=1)
+    data = e.to_json()
+    console.print(f"{sc.name}: {data['contacting_separating']} contacting/separating modes, "
+                  f"{data['sticking_sliding']} sticking/sliding modes"
+                  + ("" if e.sticking_sliding_complete else " (listing stopped at --max-modes)")
+                  + f"; {e.lp_count} LPs")
+    if json_out:
+        json_out.write_text(json.dumps(data, indent=2))
+        console.print(f"wrote {json_out}")
+
+
+@app.command()
+def simulate(
+    scene: Annotated[Path, typer.Argument(help="scene file (.json, .yaml)")],
+    combination: Annotated[str | None, typer.Option(help="expected contact states, e.g. DDDFF")] = None,
+    torque: Annotated[str | None, typer.Option(help="joint torques, e.g. '0,0,3.48,2.20'; default: the "
+                                                     "recommended member of T for --combination")] = None,
+    direction: Annotated[str | None, typer.Option(help="object motion for the torque set")] = None,
+    duration: Annotated[float, typer.Option(help="simulated seconds")] = 1.0,
+    json_out: Annotated[Path | None, typer.Option("--json", help="write the result to this JSON file")] = None,
+) -> None:
+    """Replay joint torques in MuJoCo (quasi-static) and report the object's motion and contacts."""
+    from analysis.combination import analyze_combination
+    from analysis.contacts import build_system
+    from analysis.simulate import format_report, simulate_torques
+
+    sc = _load(scene)
+    if duration <= 0:
+        _fail(f"duration: {duration} must be positive")
+    predicted = None
+    try:
+        if torque is not None:
+            tau = _parse_vector(torque, "torque")
+        elif combination is not None:
+            dvec = _parse_vector(direction, "direction") if direction is not None else None
+            if dvec is not None and len(dvec) != sc.D:
+                _fail(f"direction: has {len(dvec)} components; the object has {sc.D} coordinates")
+            rep = analyze_combination(build_system(sc), combination, direction=dvec)
+            if rep.torque is None:
+                _fail(f"combination {combination}: no torque set to replay ({rep.torque_error or rep.summary.reason})",
+                      code=1)
+            tau, predicted = rep.torque.tau, rep.torque.direction
+            console.print(f"replaying the recommended member of T for {combination}: tau = {_fmt(tau)}; "
+                          f"predicted direction {_fmt(predicted)}")
+        else:
+            _fail("torque: give --torque or --combination")
+        result = simulate_torques(sc, tau, duration=duration, combination=combination)
+    except SceneError as e:
+        _fail(str(e))
+    except CTPError as e:
+        _fail(str(e), code=1)
+    typer.echo(format_report(result))
+    if predicted is not None:
+        console.print(f"cosine(observed, predicted) = {result.cosine(predicted):.3f}")
+    if json_out:
+        data = {
+            "scene": sc.name, "combination": combination, "tau": tau.tolist(), "dr": result.dr.tolist(),
+            "direction": result.direction.tolist(), "dropped": result.dropped,
+            "predicted_direction": None if predicted is None else predicted.tolist(),
+            "contacts": [{"index": c.index, "body": c.body, "expected": c.expected, "observed": c.observed,
+                          "agrees": c.agrees, "mean_normal_force": c.mean_normal_force, "slip": c.slip}
+                         for c in result.contacts],
+        }
+        json_out.write_text(json.dumps(data, indent=2))
+        console.print(f"wrote {json_out}")
 
 
 @app.command()
