@@ -109,6 +109,10 @@ def stationary_grasp(
 
         raise SolverError("HiGHS", f"interior stationary grasp LP ended '{res.status}'")
     assert res.x is not None
+    if res.x[-1] < 0.0:
+        # f_min with s = 0 is feasible, so a negative optimum is a numerical failure on a
+        # near-singular G_c (its point violates the friction rows): keep the minimum grip
+        return _make("interior", f_min, st, fs, 0.0)
     return _make("interior", res.x[:L_c], st, fs, float(res.x[-1]))
 
 

@@ -294,10 +294,17 @@ def friction_uncertainty(
     Mx[Ls, :] = 1.0
     rhs = np.zeros(Ls + 1)
     rhs[-1] = 1.0
-    try:
+    if rank(Mx) == Ls + 1:
         lam = np.linalg.solve(Mx, rhs)
-    except np.linalg.LinAlgError:
-        return FrictionUncertainty(nu, np.zeros(Ls + 1), False, None, "the system is singular")
-    ok = bool(lam[0] > 1e-12 and np.all(lam[1:] >= -1e-12))
+        ok = bool(lam[0] > 1e-12 and np.all(lam[1:] >= -1e-12))
+        reason = "solved" if ok else "lambda violates lambda_0 > 0, lambda_i >= 0"
+    else:
+        # singular (e.g. the stationary grasps load the S-points in proportion): the paper only
+        # asks for a solution with lambda_0 > 0, lambda_i >= 0; take the one with the largest lambda_0
+        res = solve_lp(np.eye(Ls + 1)[0], A_eq=Mx, b_eq=rhs, lb=0.0, maximize=True)
+        ok = bool(res.found and res.x is not None and res.x[0] > 1e-12)
+        lam = res.x if ok and res.x is not None else np.zeros(Ls + 1)
+        reason = ("solved (singular system: largest lambda_0)" if ok
+                  else "the system is singular and has no solution with lambda_0 > 0, lambda_i >= 0")
     tau = lam[0] * ts.tau + sum(lam[j + 1] * taus[j] for j in range(Ls)) if ok else None
-    return FrictionUncertainty(nu, lam, ok, tau, "solved" if ok else "lambda violates lambda_0 > 0, lambda_i >= 0")
+    return FrictionUncertainty(nu, lam, ok, tau, reason)

@@ -95,6 +95,9 @@ def polyhedron_generators(
             verts.append(row[1:] / row[0])
         else:
             rays.append(row[1:])
+    if not verts and not np.any(H[:, 0]):
+        # a homogeneous system is a cone: cdd lists its rays and lines only, the origin is implicit
+        verts.append(np.zeros(n))
     return Generators(
         _clean(np.array(verts).reshape(-1, n)),
         _clean(_unit_rows(np.array(rays).reshape(-1, n))),

@@ -111,6 +111,16 @@ class LPModel:
             self._h.clearSolver()
             self._h.run()
             ms = self._h.getModelStatus()
+        if ms in (highspy.HighsModelStatus.kUnknown, highspy.HighsModelStatus.kSolveError):
+            # primal simplex without presolve can still fail on a near-degenerate model (seen on
+            # the Allegro scene): once more with HiGHS' defaults, then back to the warm settings
+            self._h.setOptionValue("presolve", "choose")
+            self._h.setOptionValue("simplex_strategy", 1)
+            self._h.clearSolver()
+            self._h.run()
+            ms = self._h.getModelStatus()
+            self._h.setOptionValue("presolve", "off")
+            self._h.setOptionValue("simplex_strategy", 4)
         if ms == highspy.HighsModelStatus.kOptimal:
             x = np.asarray(self._h.getSolution().col_value, dtype=float)
             return LPResult("optimal", x, float(c @ x))

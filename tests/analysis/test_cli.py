@@ -1,0 +1,116 @@
+"""``ctp analyze`` and ``ctp schema`` (typer CliRunner on analysis.cli.app)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from closure_helpers import PLANAR, example_system
+from typer.testing import CliRunner
+
+from analysis.cli import app
+from analysis.combination import CombinationParts, summarize
+from analysis.enumerate import enumerate_combinations
+
+runner = CliRunner()
+
+
+def test_analyze_writes_every_combination(tmp_path: Path) -> None:
+    """The default (mode-pruned) table agrees with the unpruned enumeration."""
+    out = tmp_path / "out.json"
+    result = runner.invoke(app, ["analyze", str(PLANAR), "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    rows = data["combinations"]
+    assert len(rows) == 243 and data["semantics"]
+    for row in rows:
+        assert isinstance(row["combination"], str) and len(row["combination"]) == 5
+        assert isinstance(row["feasible"], bool)
+    expected, _ = enumerate_combinations(example_system("planar_disk_envelope"), workers=1)
+    assert [(r["combination"], r["feasible"]) for r in rows] == [(s.combination, s.feasible) for s in expected]
+    assert "combinations feasible" in result.output
+
+
+def test_analyze_one_combination_full_report(tmp_path: Path) -> None:
+    out = tmp_path / "fdfdd.json"
+    png = tmp_path / "fdfdd.png"
+    result = runner.invoke(app, ["analyze", str(PLANAR), "--combination", "FDFDD", "--json", str(out),
+                                 "--plot", str(png)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["combination"] == "FDFDD" and data["feasible"] is True
+    assert set(data["semantics"]) >= {"dafc_unknowns", "dafc_scale", "s_point", "d_point"}
+    ts = data["torque_set"]
+    assert ts["vertices"] and len(ts["recommended"]) == 4
+    assert ts["residuals"]["inequality"] <= 1e-8 and ts["residuals"]["work"] > 0
+    for key in ("stationary", "dafc", "dpfc", "regrasp", "motion_space", "statics"):
+        assert key in data
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_analyze_direction_and_nu(tmp_path: Path) -> None:
+    """A DAFC direction given on the command line gets its torque set and, with --nu, the
+    friction-uncertainty combination."""
+    direction = summarize(CombinationParts.build(example_system("planar_disk_envelope"), "FSFSD")).example_direction
+    assert direction is not None
+    out = tmp_path / "r.json"
+    result = runner.invoke(app, ["analyze", str(PLANAR), "--combination", "FSFSD", "--nu", "0.8",
+                                 "--direction", ",".join(f"{v:.12f}" for v in direction), "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    data = json.loads(out.read_text())
+    assert data["direction_test"]["member"] is True
+    assert data["torque_set"]["residuals"]["work"] > 0
+    assert data["friction_uncertainty"]["nu"] == 0.8 and data["friction_uncertainty"]["feasible"] is True
+
+
+def _stderr(result: object) -> str:
+    return str(getattr(result, "stderr", "") or getattr(result, "output", ""))
+
+
+@pytest.mark.parametrize(("combination", "field"), [("FDFD", "combination"), ("FDFDDD", "combination"),
+                                                    ("FDFDX", "combination.4"), ("FNFDD", "combination.1")])
+def test_bad_combination_exits_2_naming_the_field(combination: str, field: str) -> None:
+    result = runner.invoke(app, ["analyze", str(PLANAR), "--combination", combination])
+    assert result.exit_code == 2
+    lines = [ln for ln in _stderr(result).splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error:") and f"{field}:" in lines[0], lines
+
+
+@pytest.mark.parametrize(("edit", "field"), [
+    (lambda d: d["contacts"][0].update(normal=[1.0, 1.0]), "contacts.0.normal"),
+    (lambda d: d["contacts"][2].update(mu=-0.5), "contacts.2.mu"),
+    (lambda d: d.update(external_wrench=[0.0, -1.0]), "external_wrench"),
+    (lambda d: d["contacts"][1].update(body="thumb/0"), "contacts.1.body"),
+])
+def test_malformed_scene_exits_2_with_one_line(tmp_path: Path, edit: object, field: str) -> None:
+    data = json.loads(PLANAR.read_text())
+    edit(data)  # type: ignore[operator]
+    # a long path must not wrap the message over several lines
+    path = tmp_path / ("a_rather_long_directory_name_" * 3) / "bad.json"
+    path.parent.mkdir()
+    path.write_text(json.dumps(data))
+    result = runner.invoke(app, ["analyze", str(path)])
+    assert result.exit_code == 2
+    lines = [ln for ln in _stderr(result).splitlines() if ln.strip()]
+    assert len(lines) == 1 and f"{field}:" in lines[0], lines
+
+
+def test_unparsable_scene_and_bad_options_exit_2(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    assert runner.invoke(app, ["analyze", str(bad)]).exit_code == 2
+    assert runner.invoke(app, ["analyze", str(PLANAR), "--combination", "FDFDD", "--nu", "2"]).exit_code == 2
+    assert runner.invoke(app, ["analyze", str(PLANAR), "--combination", "FDFDD", "--direction", "1,0"]).exit_code == 2
+    assert runner.invoke(app, ["analyze", str(PLANAR), "--direction", "1,0,0"]).exit_code == 2
+
+
+def test_schema_prints_json_schema(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["schema"])
+    assert result.exit_code == 0
+    schema = json.loads(result.stdout)
+    assert schema["type"] == "object"
+    assert {"dim", "object", "contacts", "external_wrench"} <= set(schema["properties"])
+    out = tmp_path / "schema.json"
+    assert runner.invoke(app, ["schema", "--out", str(out)]).exit_code == 0
+    assert json.loads(out.read_text()) == schema

@@ -1,0 +1,187 @@
+"""Joint torques realising a DAFC motion (paper eq. 29-32) and the friction-uncertainty
+combination (end of section IV-C), re-checked with forces and torques recomputed here."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from closure_helpers import disk_scene, effective_grasp_matrix, full_forces, parts_of, scipy_lp, slip
+
+from analysis.combination import CombinationParts, summarize
+from analysis.contacts import build_system
+from analysis.dafc import dafc_set
+from analysis.exceptions import EmptyTorqueSet, NotInDAFC
+from analysis.stationary import stationary_grasp
+from analysis.torques import TorqueSet, friction_uncertainty, torque_set
+
+NAME = "planar_disk_envelope"
+#: feasible combinations of the planar example whose example direction has a torque set:
+#: F/D only, and with S-points on the fingers and on the palm
+COMBINATIONS = ["FDFDD", "DDDFF", "FSFSD", "FSFSS", "SSDDF", "SDSSS", "DDSSS"]
+TOL = 1e-8
+
+
+def _torque_set(combination: str) -> tuple[CombinationParts, TorqueSet]:
+    p = parts_of(NAME, combination)
+    s = summarize(p)
+    assert s.feasible and s.example_direction is not None
+    g = stationary_grasp(p.system, p.sel, p.st, p.fs)
+    return p, torque_set(p.system, p.sel, p.ms, p.st, p.fs, g, s.example_direction)
+
+
+def _preimage(ts: TorqueSet, tau: np.ndarray | None, ray: bool) -> np.ndarray | None:
+    """Contact forces f in P (or its recession cone) with T_map f = tau, by scipy."""
+    n = ts.A_ub.shape[1]
+    b_ub = np.zeros_like(ts.b_ub) if ray else ts.b_ub
+    b_eq = np.zeros_like(ts.b_eq) if ray else ts.b_eq
+    A_eq, rhs = ts.A_eq, b_eq
+    if tau is not None:
+        A_eq = np.vstack([ts.A_eq, ts.T_map])
+        rhs = np.concatenate([b_eq, tau])
+    status, _, f = scipy_lp(np.zeros(n), ts.A_ub, b_ub + TOL, A_eq, rhs)
+    return f if status == 0 else None
+
+
+@pytest.mark.parametrize("combination", COMBINATIONS)
+def test_recommended_member_and_generators_are_certified(combination: str) -> None:
+    p, ts = _torque_set(combination)
+    system, sel, ms, st = p.system, p.sel, p.ms, p.st
+    M = system.M
+    # the recommended member: its forces satisfy (30) and do positive work
+    res = ts.residuals(ts.f_c)
+    assert res["inequality"] <= TOL and res["equality"] <= TOL
+    assert res["work"] > 0.0 and ts.work == pytest.approx(res["work"], abs=1e-12)
+    np.testing.assert_allclose(ts.tau, ts.T_map @ ts.f_c, rtol=0, atol=1e-12)
+    # the chosen motion keeps the F/S/N constraints, does not penetrate, and S-points slide
+    motion = ms.Phi_full @ ts.zeta_c
+    dr = motion[M:]
+    np.testing.assert_allclose(dr, ts.direction, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(motion[:M], ts.dq, rtol=0, atol=1e-12)
+    assert ts.phi == pytest.approx(float(np.linalg.norm(ts.dq)), rel=1e-6)
+    np.testing.assert_allclose(st.J_c @ ts.dq - st.G_c.T @ dr, 0.0, rtol=0, atol=1e-9)  # A_c [dq; dr] = 0
+    for i in sel.d_index:
+        assert system.normals[i] @ (system.contact_A(i) @ motion) <= 1e-8
+    for i in sel.s_index:
+        assert np.linalg.norm(slip(system, i, motion)) > 1e-6
+    # independently: the contact forces (kinetic friction included) give a net wrench exactly
+    # along the motion (W_2 and W_3 rows of 30) with work ts.work, and the joint torque that
+    # balances them on the fingers is tau = J^T f
+    F = full_forces(system, sel, ts.f_c, motion)
+    w = sum(system.G_blocks[i] @ F[i] for i in range(system.L)) + system.w_ex
+    np.testing.assert_allclose(w, (dr @ w) * dr, rtol=0, atol=1e-8)
+    assert dr @ w == pytest.approx(ts.work, abs=1e-9)
+    tau = sum(system.J_blocks[i].T @ F[i] for i in range(system.L))
+    np.testing.assert_allclose(ts.tau, tau, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(effective_grasp_matrix(system, sel, st.G_c, motion), ts.W_map, rtol=0, atol=1e-12)
+    # every vertex and ray of T comes from admissible contact forces of P
+    assert ts.generators is not None and ts.vertices is not None and ts.rays is not None
+    assert len(ts.vertices) >= 1
+    for v in ts.vertices:
+        f = _preimage(ts, v, ray=False)
+        assert f is not None, v
+        r = ts.residuals(f)
+        assert r["inequality"] <= 1e-7 and r["equality"] <= 1e-7 and r["work"] >= -1e-7
+    for ray in ts.rays:
+        assert _preimage(ts, ray, ray=True) is not None, ray
+
+
+@pytest.mark.parametrize("combination", ["FDFDD", "DDDFF"])
+def test_stationary_torque_lies_on_the_closure_of_T(combination: str) -> None:
+    """Without S-points the stationary forces are in P with zero work: tau_st is on the face
+    work = 0 of T; and tau has no component in the finger redundancy beyond tau_st's
+    (Lambda~_qr^T tau_ad = 0 of eq. 30)."""
+    p, ts = _torque_set(combination)
+    g = stationary_grasp(p.system, p.sel, p.st, p.fs)
+    r = ts.residuals(g.f_c)
+    assert r["inequality"] <= 1e-9 and r["equality"] <= 1e-9 and r["work"] == pytest.approx(0.0, abs=1e-9)
+    assert _preimage(ts, g.tau, ray=False) is not None
+    np.testing.assert_allclose(p.ms.Lambda_qr_t.T @ (ts.tau - g.tau), 0.0, rtol=0, atol=1e-9)
+
+
+def test_directions_outside_dafc_raise() -> None:
+    """Non-members of every kind: not allowable (a D-point would penetrate), outside the motion
+    space, and allowable but without positive work."""
+    p = parts_of(NAME, "DDDFF")
+    g = stationary_grasp(p.system, p.sel, p.st, p.fs)
+    ds = dafc_set(p.oracle(), samples=36, refine=0)
+    outside = [t.direction for t in ds.tests if not t.member]
+    assert outside
+    for dr in outside:
+        with pytest.raises(NotInDAFC, match="not allowable"):
+            torque_set(p.system, p.sel, p.ms, p.st, p.fs, g, dr)
+    off = np.ones(3) - p.ms.Lambda_r_t @ (p.ms.Lambda_r_t.T @ np.ones(3))
+    with pytest.raises(NotInDAFC, match="outside the motion space"):
+        torque_set(p.system, p.sel, p.ms, p.st, p.fs, g, p.ms.Lambda_r_t[:, 0] + off)
+    disk = build_system(disk_scene(2))
+    q = CombinationParts.build(disk, "ND")
+    g = stationary_grasp(disk, q.sel, q.st, q.fs)
+    for d in ([-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]):
+        with pytest.raises(NotInDAFC, match="positive work"):
+            torque_set(disk, q.sel, q.ms, q.st, q.fs, g, np.array(d))
+
+
+def test_empty_torque_set_is_really_empty() -> None:
+    """SSSSS (no redundancy, so the motion is fixed by the direction): its example direction is
+    in DAFC (positive work, eq. 22) yet no contact forces put the net wrench exactly along it
+    (W_3 of eq. 30): T is empty. Checked with scipy at the same motion."""
+    p = parts_of(NAME, "SSSSS")
+    assert p.ms.n_redundant == 0
+    s = summarize(p)
+    assert s.feasible and s.example_direction is not None
+    g = stationary_grasp(p.system, p.sel, p.st, p.fs)
+    with pytest.raises(EmptyTorqueSet):
+        torque_set(p.system, p.sel, p.ms, p.st, p.fs, g, s.example_direction)
+    u = p.ms.coordinates(s.example_direction)
+    u /= np.linalg.norm(u)
+    motion = p.ms.Phi_full @ u
+    G = effective_grasp_matrix(p.system, p.sel, p.st.G_c, motion)
+    dr = motion[p.system.M :]
+    Q = np.eye(3) - np.outer(dr, dr)  # w - (dr.w) dr = 0
+    A_ub = np.vstack([p.fs.C, -(dr @ G)[None, :]])
+    b_ub = np.r_[np.zeros(p.fs.C.shape[0]), dr @ p.system.w_ex]
+    status, _, _ = scipy_lp(np.zeros(G.shape[1]), A_ub, b_ub, Q @ G, -(Q @ p.system.w_ex))
+    assert status == 2
+
+
+def test_frictionless_disk_push() -> None:
+    """ND on the frictionless disk, pushing along +x: the torque set is the ray of pushes
+    n1 > 0 through tau = J_c^T n1 = (-n1,) (the tip moves -x for q > 0), with tau_st = 0 at its
+    apex (a cone: cdd must report its apex)."""
+    system = build_system(disk_scene(1))
+    p = CombinationParts.build(system, "ND")
+    g = stationary_grasp(system, p.sel, p.st, p.fs)
+    ts = torque_set(system, p.sel, p.ms, p.st, p.fs, g, np.array([1.0, 0.0, 0.0]))
+    assert ts.generators is not None
+    np.testing.assert_allclose(ts.generators.vertices, [[0.0, 0.0]], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(ts.generators.rays, [[-1.0, 0.0]], rtol=0, atol=1e-12)
+    assert ts.tau[0] < 0.0 and ts.work == pytest.approx(-ts.tau[0], rel=1e-9)
+
+
+@pytest.mark.parametrize("combination", ["FSFSD", "FSFSS", "SSDDF", "SDSSS", "DDSSS"])
+def test_friction_uncertainty_at_nu_one_is_tau_mu(combination: str) -> None:
+    """nu = 1: lambda = e_0 solves the paper's system (its first column vanishes above the last
+    row), also when the system is singular (SSDDF, SDSSS, DDSSS: the stationary grasps load the
+    S-points in proportion); the torque is tau_mu itself."""
+    p, ts = _torque_set(combination)
+    fu = friction_uncertainty(p.system, p.sel, p.st, p.fs, ts, 1.0)
+    assert fu.nu == 1.0 and fu.feasible, fu.reason
+    np.testing.assert_allclose(fu.lambdas, np.eye(len(fu.lambdas))[0], rtol=0, atol=1e-9)
+    assert fu.tau is not None
+    np.testing.assert_allclose(fu.tau, ts.tau, rtol=0, atol=1e-9)
+
+
+def test_friction_uncertainty_solves_the_paper_system() -> None:
+    """The lambdas sum to one; 'feasible' means lambda_0 > 0, lambda_i >= 0; nu outside [0, 1]
+    is refused. FSFSD (regular) stays feasible at nu = 0.8 and 0.5 with lambda_0 < 1."""
+    for combination in ["FSFSD", "FSFSS", "SSDDF", "SDSSS", "DDSSS"]:
+        p, ts = _torque_set(combination)
+        for nu in (0.8, 0.5):
+            fu = friction_uncertainty(p.system, p.sel, p.st, p.fs, ts, nu)
+            assert (fu.tau is not None) == fu.feasible
+            if fu.feasible or fu.reason.startswith("lambda violates"):
+                assert fu.lambdas.sum() == pytest.approx(1.0, abs=1e-9)
+                assert fu.feasible == bool(fu.lambdas[0] > 1e-12 and np.all(fu.lambdas[1:] >= -1e-12))
+            if combination == "FSFSD":
+                assert fu.feasible and 0.0 < fu.lambdas[0] < 1.0
+        with pytest.raises(ValueError, match="nu"):
+            friction_uncertainty(p.system, p.sel, p.st, p.fs, ts, 1.5)
