@@ -183,7 +183,7 @@ def _list(a: Array) -> Any:
 
 
 def _realisable_candidates(
-    parts: CombinationParts, oracle: DAFCOracle, target: Array, dset: DAFCSet | None, limit: int = 6
+    parts: CombinationParts, oracle: DAFCOracle, target: Array, dset: DAFCSet | None, limit: int = 40
 ) -> list[Array]:
     """Directions to try for the default torque set when the example direction has none.
 
@@ -205,8 +205,13 @@ def _realisable_candidates(
         if np.linalg.norm(k) > 1e-9:
             out.append(k / np.linalg.norm(k))
     if dset is not None:
-        order = np.argsort(-np.where(np.isfinite(dset.work), dset.work, 1e300))
-        out.extend(dset.directions[j] for j in order if dset.member[j])
+        # bounded work first (largest first): an unbounded supremum often means the net wrench
+        # can grow without being parallel to the motion, which T (W_3) excludes
+        finite = [j for j in np.argsort(-np.nan_to_num(dset.work, posinf=-1.0)) if dset.member[j]
+                  and np.isfinite(dset.work[j])]
+        unbounded = [j for j in range(len(dset.member)) if dset.member[j] and not np.isfinite(dset.work[j])]
+        stride = max(1, len(unbounded) // max(1, limit - len(out) - len(finite)))
+        out.extend(dset.directions[j] for j in finite + unbounded[::stride])
     return out[:limit]
 
 

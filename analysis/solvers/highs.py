@@ -21,6 +21,9 @@ from analysis.exceptions import SolverError, SolverTimeLimit
 
 INF = highspy.kHighsInf
 
+#: HiGHS primal/dual feasibility tolerance.
+FEAS_TOL = 1e-10
+
 Status = Literal["optimal", "infeasible", "unbounded"]
 
 
@@ -83,6 +86,10 @@ class LPModel:
         self._h.setOptionValue("output_flag", False)
         self._h.setOptionValue("presolve", "off")
         self._h.setOptionValue("simplex_strategy", 4)
+        # tight feasibility: near-singular grasps (e.g. the Allegro scene) otherwise accept
+        # friction violations of ~1e-7 and call an infeasible stationary grasp feasible
+        self._h.setOptionValue("primal_feasibility_tolerance", FEAS_TOL)
+        self._h.setOptionValue("dual_feasibility_tolerance", FEAS_TOL)
         if time_limit is not None:
             self._h.setOptionValue("time_limit", float(time_limit))
         status = self._h.passModel(lp)
