@@ -111,9 +111,69 @@ def cone_generators(B: Array) -> Generators:
     return polyhedron_generators(B, np.zeros(B.shape[0]))
 
 
+def _unique_rows(A: Array, decimals: int = 10) -> Array:
+    """Rows of ``A`` without (numerical) duplicates, first occurrence kept."""
+    if A.shape[0] < 2:
+        return A
+    _, idx = np.unique(np.round(A, decimals), axis=0, return_index=True)
+    return A[np.sort(idx)]
+
+
+#: Above this many generators, redundancy is removed with HiGHS LPs (one per generator) instead
+#: of cdd's canonicalisation, which is several times slower on a few hundred rows.
+LP_REDUCTION_ABOVE = 24
+
+
+def _reduce_by_lp(g: Generators) -> Generators:
+    """Drop every vertex in the hull of the others plus the recession cone, and every ray in
+    the cone of the other rays plus the lines (sequentially, so the set stays generating).
+
+    One warm-started HiGHS model per kind: generator ``i`` is tested by fixing its own weight to
+    zero and asking for the others to reproduce it.
+    """
+    from analysis.solvers.highs import LPModel
+
+    V, R, Ln = g.vertices, g.rays, g.lines
+    n = V.shape[1] if V.size else R.shape[1]
+    keep_r = np.ones(len(R), dtype=bool)
+    if len(R) > 1:
+        A = np.vstack([R, Ln, -Ln]).T  # (n, k)
+        model = LPModel(A.shape[1], A_eq=A, b_eq=np.zeros(n), lb=0.0)
+        zero = np.zeros(A.shape[1])
+        for i in range(len(R)):
+            model.set_col_bounds(i, 0.0, 0.0)
+            model.set_eq_rhs(R[i])
+            if model.solve(zero).found:
+                keep_r[i] = False  # stays fixed at zero: removed for the following tests
+            else:
+                model.set_col_bounds(i, 0.0, np.inf)
+    R = R[keep_r]
+    keep_v = np.ones(len(V), dtype=bool)
+    if len(V) > 1:
+        A = np.vstack([np.hstack([V, np.ones((len(V), 1))]), np.hstack([np.vstack([R, Ln, -Ln]),
+                                                                          np.zeros((len(R) + 2 * len(Ln), 1))])]).T
+        model = LPModel(A.shape[1], A_eq=A, b_eq=np.zeros(n + 1), lb=0.0)
+        zero = np.zeros(A.shape[1])
+        for i in range(len(V)):
+            model.set_col_bounds(i, 0.0, 0.0)
+            model.set_eq_rhs(np.r_[V[i], 1.0])
+            if model.solve(zero).found:
+                keep_v[i] = False
+            else:
+                model.set_col_bounds(i, 0.0, np.inf)
+    return Generators(V[keep_v].reshape(-1, n), R.reshape(-1, n), Ln)
+
+
 def reduce_generators(g: Generators) -> Generators:
-    """Remove redundant vertices/rays (cdd canonical V-representation)."""
+    """Remove redundant vertices/rays (cdd canonical V-representation).
+
+    Duplicates (common after a linear map with a null space) are dropped first, since cdd's
+    redundancy removal costs one LP per row.
+    """
     n = g.vertices.shape[1] if g.vertices.size else (g.rays.shape[1] if g.rays.size else g.lines.shape[1])
+    g = Generators(_unique_rows(g.vertices), _unique_rows(g.rays), _unique_rows(g.lines))
+    if len(g.vertices) + len(g.rays) > LP_REDUCTION_ABOVE:
+        return _reduce_by_lp(g)  # already irredundant: cdd's check would cost one LP per row again
     rows = (
         [[1.0, *v] for v in g.vertices] + [[0.0, *r] for r in g.rays] + [[0.0, *ln] for ln in g.lines]
     )

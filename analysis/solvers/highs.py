@@ -107,6 +107,15 @@ class LPModel:
         for r, c, v in zip(np.ravel(rows), np.ravel(cols), np.ravel(values), strict=True):
             self._h.changeCoeff(int(r), int(c), float(v))
 
+    def set_col_bounds(self, j: int, lb: float, ub: float) -> None:
+        self._h.changeColBounds(int(j), float(lb) if np.isfinite(lb) else -INF, float(ub) if np.isfinite(ub) else INF)
+
+    def set_eq_rhs(self, b_eq: Array) -> None:
+        """New right-hand side of the equality rows (warm start kept)."""
+        b = np.asarray(b_eq, dtype=float).ravel()
+        idx = np.arange(self._n_ub, self._n_ub + len(b), dtype=np.int32)
+        self._h.changeRowsBounds(len(b), idx, b, b)
+
     def solve(self, c: Array, maximize: bool = False) -> LPResult:
         c = np.asarray(c, dtype=float).ravel()
         sense = -1.0 if maximize else 1.0
