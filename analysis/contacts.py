@@ -119,24 +119,17 @@ class GraspSystem:
 
     @cached_property
     def pyramid(self) -> tuple[Array, Array]:
-        """Per contact, the unit-free facet normals ``(L, k', d)`` and generators ``(L, k', d)`` of
-        its friction cone (2-D: the two edges, exact; 3-D: the inscribed ``k``-sided pyramid),
-        see :mod:`analysis.friction`. Computed once per configuration."""
+        """Per contact, the facet normals ``(L, k', d)`` and generators ``(L, k', d)`` of its
+        friction cone (2-D: the two edges, exact; 3-D: the inscribed ``k``-sided pyramid), see
+        :mod:`analysis.friction`. Computed once per configuration."""
+        from analysis.friction import _pyramid
+
         L, d, k = self.L, self.d, self.friction_sides
         kk = 2 if d == 2 else k
         facets = np.zeros((L, kk, d))
         gens = np.zeros((L, kk, d))
         for i in range(L):
-            n, T, mu = self.normals[i], self.tangents[i], self.mu[i]
-            if d == 2:
-                facets[i] = [T[0] - mu * n, -T[0] - mu * n]
-                gens[i] = [n + mu * T[0], n - mu * T[0]]
-            else:
-                psi = (2 * np.arange(k) + 1) * np.pi / k
-                phi = 2 * np.arange(k) * np.pi / k
-                c = np.cos(np.pi / k)
-                facets[i] = np.cos(psi)[:, None] * T[0] + np.sin(psi)[:, None] * T[1] - mu * c * n
-                gens[i] = n + mu * (np.cos(phi)[:, None] * T[0] + np.sin(phi)[:, None] * T[1])
+            facets[i], gens[i] = _pyramid(self.normals[i], self.tangents[i], self.mu[i], d, k)
         return facets, gens
 
     def frictional(self) -> NDArray[np.bool_]:

@@ -275,8 +275,8 @@ class DAFCOracle:
                 continue
             if self.sel.s_index:
                 sl = self.slips_of(zc)
-                still = [i for k, i in enumerate(self.sel.s_index)
-                         if np.linalg.norm(sl[k]) <= SLIP_TOL * float(np.linalg.norm(zc))]
+                small = np.linalg.norm(sl, axis=1) <= SLIP_TOL * float(np.linalg.norm(zc))
+                still = [self.sel.s_index[k] for k in np.flatnonzero(small)]
                 if still:
                     last = DirectionTest(dr, u, zc, False, np.nan,
                                          f"S-point {still[0]} does not slide for this motion", self.exact)

@@ -46,9 +46,9 @@ def friction_set(system: GraspSystem, sel: Selection, mu_scale: float = 1.0) -> 
     """Eq. (13), (14), (16) for the combination ``sel``; ``mu_scale`` (``nu``) scales every mu."""
     d, k = system.d, system.friction_sides
     L_c = sel.L_c
-    rows: list[Array] = []
-    owners: list[int] = []
-    gens: list[Array] = []
+    row_blocks: list[Array] = []
+    owners: list[Array] = []
+    gen_blocks: list[Array] = []
     N = np.zeros((system.L, L_c))
     for i, s in enumerate(sel.combination):
         sl = sel.c_slices[i]
@@ -58,50 +58,43 @@ def friction_set(system: GraspSystem, sel: Selection, mu_scale: float = 1.0) -> 
         mu = mu_scale * system.mu[i]
         if s == "F":
             N[i, sl] = n
-            if mu_scale == 1.0:
+            if mu == 0.0:
+                # a frictional contact at nu = 0: normal force >= 0, tangential force zero
+                T = system.tangents[i]
+                facets = np.vstack([-n[None, :], T, -T])
+                gdirs = n[None, :]
+            elif mu_scale == 1.0:
                 facets, gdirs = system.pyramid[0][i], system.pyramid[1][i]
             else:
-                T = system.tangents[i]  # (d-1, d)
-                if d == 2:
-                    facets = np.array([T[0] - mu * n, -T[0] - mu * n])
-                    gdirs = np.array([n + mu * T[0], n - mu * T[0]])
-                else:
-                    psi = (2 * np.arange(k) + 1) * np.pi / k
-                    phi = 2 * np.arange(k) * np.pi / k
-                    c = np.cos(np.pi / k)
-                    facets = np.cos(psi)[:, None] * T[0] + np.sin(psi)[:, None] * T[1] - mu * c * n
-                    gdirs = n + mu * (np.cos(phi)[:, None] * T[0] + np.sin(phi)[:, None] * T[1])
-            if mu == 0.0:
-                facets = -n[None, :]
-                gdirs = n[None, :]
-                # a frictional contact at nu = 0 keeps the tangential force zero
-                for t in system.tangents[i]:
-                    for sign in (1.0, -1.0):
-                        row = np.zeros(L_c)
-                        row[sl] = sign * t
-                        rows.append(row)
-                        owners.append(i)
-            for fr in facets:
-                row = np.zeros(L_c)
-                row[sl] = fr / np.linalg.norm(fr)
-                rows.append(row)
-                owners.append(i)
-            for g in gdirs:
-                col = np.zeros(L_c)
-                col[sl] = g
-                gens.append(col)
+                facets, gdirs = _pyramid(n, system.tangents[i], mu, d, k)
+            rows = np.zeros((len(facets), L_c))
+            rows[:, sl] = facets / np.linalg.norm(facets, axis=1, keepdims=True)
+            gens = np.zeros((len(gdirs), L_c))
+            gens[:, sl] = gdirs
         else:  # S or N: scalar normal force >= 0
             N[i, sl] = 1.0
-            row = np.zeros(L_c)
-            row[sl] = -1.0
-            rows.append(row)
-            owners.append(i)
-            col = np.zeros(L_c)
-            col[sl] = 1.0
-            gens.append(col)
-    C = np.array(rows).reshape(len(rows), L_c)
-    E = np.array(gens).reshape(len(gens), L_c).T
-    return FrictionSet(C, np.array(owners, dtype=int), E, N)
+            rows = np.zeros((1, L_c))
+            rows[0, sl] = -1.0
+            gens = np.zeros((1, L_c))
+            gens[0, sl] = 1.0
+        row_blocks.append(rows)
+        owners.append(np.full(len(rows), i, dtype=int))
+        gen_blocks.append(gens)
+    C = np.vstack(row_blocks) if row_blocks else np.zeros((0, L_c))
+    E = np.vstack(gen_blocks).T if gen_blocks else np.zeros((L_c, 0))
+    return FrictionSet(C, np.concatenate(owners) if owners else np.zeros(0, dtype=int), E, N)
+
+
+def _pyramid(n: Array, T: Array, mu: float, d: int, k: int) -> tuple[Array, Array]:
+    """Facet normals and generators of the friction cone of one contact (see module docstring)."""
+    if d == 2:
+        return np.array([T[0] - mu * n, -T[0] - mu * n]), np.array([n + mu * T[0], n - mu * T[0]])
+    psi = (2 * np.arange(k) + 1) * np.pi / k
+    phi = 2 * np.arange(k) * np.pi / k
+    c = np.cos(np.pi / k)
+    facets = np.cos(psi)[:, None] * T[0] + np.sin(psi)[:, None] * T[1] - mu * c * n
+    gens = n + mu * (np.cos(phi)[:, None] * T[0] + np.sin(phi)[:, None] * T[1])
+    return facets, gens
 
 
 @dataclass(frozen=True)
