@@ -256,7 +256,9 @@ def analyze_combination(
                 err = None
                 break
             except CTPError as e:
-                err = err or str(e)
+                err = err or f"direction {np.round(cand, 4).tolist()}: {e}"
+        if torque is None and len(candidates) > 1:
+            err = f"{err} (and {len(candidates) - 1} other DAFC directions tried)"
     elif target is not None:
         err = "no stationary grasp (18): the torque set is not defined"
     if torque is not None and nu is not None:

@@ -241,8 +241,10 @@ class DAFCOracle:
         dr = np.asarray(dr, dtype=float)
         u = ms.coordinates(dr)
         nu = float(np.linalg.norm(u))
-        if ms.a_bar == 0 or nu < 1e-12:
+        if ms.a_bar == 0:
             return DirectionTest(dr, u, None, False, np.nan, "object cannot move (motion space is {0})", True)
+        if nu < 1e-12:
+            return DirectionTest(dr, u, None, False, np.nan, "direction is outside the motion space", True)
         if float(np.linalg.norm(ms.Lambda_r_t @ u - dr)) > 1e-6 * max(1.0, float(np.linalg.norm(dr))):
             return DirectionTest(dr, u, None, False, np.nan, "direction is outside the motion space", True)
         u = u / nu

@@ -143,7 +143,25 @@ def torque_set(
     if not test.member:
         raise NotInDAFC(f"direction {np.round(direction, 4).tolist()} is not in DAFC: {test.reason}")
     u = test.u
-    zc, status, phi = _chosen_motion(oracle, system, sel, ms, st, fs, u, start=test)
+    try:
+        zc, status, phi = _chosen_motion(oracle, system, sel, ms, st, fs, u, start=test)
+        return _for_motion(system, sel, ms, st, fs, oracle, u, zc, status, phi, work_target)
+    except EmptyTorqueSet:
+        if test.zeta_c is None:
+            raise
+        # The phi-minimal motion may reverse an S-point's slip (a different friction direction);
+        # the oracle's certificate motion is a member of S with positive work: use it.
+        zc = test.zeta_c
+        phi = float(np.linalg.norm(ms.Lambda_q_t @ u + ms.Lambda_qr_t @ zc[ms.a_bar :]))
+        return _for_motion(system, sel, ms, st, fs, oracle, u, zc, "DAFC certificate motion (phi not minimised)",
+                           phi, work_target)
+
+
+def _for_motion(
+    system: GraspSystem, sel: Selection, ms: MotionSpace, st: Statics, fs: FrictionSet, oracle: DAFCOracle,
+    u: Array, zc: Array, status: str, phi: float, work_target: float | None,
+) -> TorqueSet:
+    """The set (32) once the motion ``dzeta_c`` is fixed (all conditions linear in ``f_c``)."""
     motion = ms.Phi_full @ zc  # (M + D,)
     M = system.M
     kf: KineticFriction | None = None

@@ -114,7 +114,7 @@ class LPModel:
         """New right-hand side of the equality rows (warm start kept)."""
         b = np.asarray(b_eq, dtype=float).ravel()
         idx = np.arange(self._n_ub, self._n_ub + len(b), dtype=np.int32)
-        self._h.changeRowsBounds(len(b), idx, b, b)
+        self._h.changeRowsBounds(len(b), idx, b, b)  # type: ignore[attr-defined]
 
     def solve(self, c: Array, maximize: bool = False) -> LPResult:
         c = np.asarray(c, dtype=float).ravel()
