@@ -230,6 +230,8 @@ def simulate(
                                                      "recommended member of T for --combination")] = None,
     direction: Annotated[str | None, typer.Option(help="object motion for the torque set")] = None,
     duration: Annotated[float, typer.Option(help="simulated seconds")] = 1.0,
+    stop_fraction: Annotated[float, typer.Option(help="stop once the object moved this fraction of its size "
+                                                      "(the analysis is first order)")] = 0.02,
     json_out: Annotated[Path | None, typer.Option("--json", help="write the result to this JSON file")] = None,
 ) -> None:
     """Replay joint torques in MuJoCo (quasi-static) and report the object's motion and contacts."""
@@ -257,7 +259,10 @@ def simulate(
                           f"predicted direction {_fmt(predicted)}")
         else:
             _fail("torque: give --torque or --combination")
-        result = simulate_torques(sc, tau, duration=duration, combination=combination)
+        from analysis.simulate import object_size
+
+        result = simulate_torques(sc, tau, duration=duration, combination=combination,
+                                  stop_distance=stop_fraction * object_size(sc) if stop_fraction > 0 else None)
     except SceneError as e:
         _fail(str(e))
     except CTPError as e:

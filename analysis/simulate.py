@@ -194,7 +194,7 @@ class SimulationParams:
     force_tol_rel: float = 1e-2
     slip_tol_rel: float = 0.1
     slip_abs_rel: float = 1e-3
-    slip_pen_factor: float = 3.0  # slip below this * the deepest penetration is elastic creep
+    slip_pen_factor: float = 3.0  # slip below this * the typical penetration is elastic creep
     drop_rel: float = 0.5  # the object is "dropped" when it has moved farther than this * s
 
 
@@ -393,10 +393,11 @@ def _finger_links(finger: FingerModel) -> list[_LinkSpec]:
     return out
 
 
-def _segment_geom(name: str, a: Array, b: Array, radius: float, extra: str = "") -> str:
+def _segment_geom(name: str, a: Array, b: Array, radius: float) -> str:
+    """A capsule about the segment ``[a, b]`` (a sphere at ``a`` if it has zero length)."""
     if np.linalg.norm(np.asarray(b) - np.asarray(a)) < 1e-12:
-        return f'<geom name="{name}" type="sphere" pos="{_v(a)}" size="{_f(radius)}"{extra}/>'
-    return f'<geom name="{name}" type="capsule" fromto="{_v(a)} {_v(b)}" size="{_f(radius)}"{extra}/>'
+        return f'<geom name="{name}" type="sphere" pos="{_v(a)}" size="{_f(radius)}"/>'
+    return f'<geom name="{name}" type="capsule" fromto="{_v(a)} {_v(b)}" size="{_f(radius)}"/>'
 
 
 def _object_geom(scene: Scene, eps: float, s: float, assets: list[str]) -> str:
@@ -1137,7 +1138,7 @@ def format_report(result: SimulationResult, direction: Array | None = None) -> s
         header += f" {'exp':>3}"
     header += (
         f" {'observed':<9} {'mean n':>9} {'max n':>9} {'loaded':>6} {'slip':>10} {'travel':>10} {'gap':>10}"
-        "  mean force (world)"
+        "  mean force (world)      "
     )
     if has_comb:
         header += "  ok"
@@ -1150,7 +1151,7 @@ def format_report(result: SimulationResult, direction: Array | None = None) -> s
         force = "(" + ", ".join(f"{v:+.3g}" for v in c.mean_force) + ")"
         row += (
             f" {c.observed:<9} {c.mean_normal_force:>9.4g} {c.max_normal_force:>9.4g} "
-            f"{c.loaded_fraction:>6.0%} {c.slip:>10.3g} {c.travel:>10.3g} {c.final_gap:>10.3g}  {force:<18}"
+            f"{c.loaded_fraction:>6.0%} {c.slip:>10.3g} {c.travel:>10.3g} {c.final_gap:>10.3g}  {force:<24}"
         )
         if has_comb:
             row += "  " + ("yes" if c.agrees else "NO")

@@ -16,7 +16,7 @@ import pytest
 from analysis.combination import analyze_combination
 from analysis.contacts import build_system
 from analysis.scene import load_scene
-from analysis.simulate import simulate_torques
+from analysis.simulate import object_size, simulate_torques
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 COSINE_MIN = 0.9
@@ -35,9 +35,11 @@ def test_torque_set_member_moves_object_along_dafc_direction(planar, combination
     assert report.summary.feasible
     ts = report.torque
     assert ts is not None, report.torque_error
-    res = simulate_torques(scene, ts.tau, duration=1.0, combination=combination)
+    # first-order prediction: stop once the object moved 2 % of its size
+    res = simulate_torques(scene, ts.tau, duration=1.0, combination=combination,
+                           stop_distance=0.02 * object_size(scene))
     assert not res.dropped, res.drop_reason
-    assert float(np.linalg.norm(res.dr)) > 1e-3, "the object should move"
+    assert float(np.linalg.norm(res.dr)) > 0.01 * object_size(scene), "the object should move"
     assert res.cosine(ts.direction) >= COSINE_MIN, (res.direction, ts.direction)
     observed = [(c.expected, c.observed) for c in res.contacts]
     assert res.agrees, observed

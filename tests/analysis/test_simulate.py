@@ -44,6 +44,7 @@ from analysis.stationary import stationary_grasp
 EXAMPLES = Path(__file__).parents[2] / "examples"
 PLANAR = EXAMPLES / "planar_disk_envelope.json"
 SPHERE = EXAMPLES / "sphere_four_finger_palm.json"
+ALLEGRO = EXAMPLES / "allegro_right_box.json"
 
 
 def _geom_of(hand: HandKinematics, body: str) -> str:
@@ -58,10 +59,11 @@ def _geom_of(hand: HandKinematics, body: str) -> str:
 # The MJCF is the scene
 
 
-@pytest.mark.parametrize("path", [PLANAR, SPHERE], ids=["planar", "sphere"])
+@pytest.mark.parametrize("path", [PLANAR, SPHERE, ALLEGRO], ids=["planar", "sphere", "allegro-urdf"])
 def test_link_end_points_match_kinematics(path: Path) -> None:
     """MuJoCo's sites at the link ends equal ``HandKinematics.body_segment`` for random ``q``:
-    same chain, same joint axes, same ``q`` convention."""
+    same chain, same joint axes, same ``q`` convention (also for URDF fingers, whose tip links
+    hang on fixed joints)."""
     scene = load_scene(path)
     hand = HandKinematics.from_scene(scene)
     model = build_model(scene)
