@@ -133,6 +133,10 @@ class CombinationReport:
                     "rays": _list(self.dafc.allowable.rays),
                     "lines": _list(self.dafc.allowable.lines),
                 },
+                "exact_description": None if self.dafc.description is None else {
+                    "definition": "DAFC = {dr in cone(rays) + span(lines) : work_generators @ dr > 0 for some row}",
+                    "work_generators": _list(self.dafc.description.work_generators),
+                },
             }
         if self.dpfc is not None:
             out["dpfc"] = {"dim": self.dpfc.dim, "vertices": _list(self.dpfc.vertices),

@@ -410,3 +410,34 @@ def test_membership_does_not_depend_on_the_object_frame_origin() -> None:
         oracle = CombinationParts.build(system, "SSN").oracle()
         answers.append(oracle.test(np.array([1.0, 0.0, 0.0])).member)  # pure translation: same twist
     assert answers[0] == answers[1] == answers[2]
+
+
+@pytest.mark.parametrize("name", ["planar_disk_envelope", "sphere_four_finger_palm"])
+def test_exact_description_agrees_with_the_oracle(name):
+    """Without S-points, DAFC = A_r minus the cone where no admissible force does work: the
+    exact description must give the oracle's answer on random allowable directions."""
+    from analysis.dafc import allowable_cone, dafc_exact
+
+    system = example_system(name)
+    rng = np.random.default_rng(11)
+    combos = [c for c in all_combinations(system) if "S" not in c]
+    checked = 0
+    for c in rng.choice(combos, size=min(25, len(combos)), replace=False):
+        parts = CombinationParts.build(system, str(c))
+        if parts.ms.a_bar == 0:
+            continue
+        oracle = parts.oracle()
+        exact = dafc_exact(oracle)
+        if exact is None:
+            continue
+        dirs = allowable_cone(parts.ms).all_directions()
+        if dirs.shape[0] == 0:
+            continue
+        for _ in range(10):
+            u = rng.random(len(dirs)) @ dirs  # a direction of A_r
+            if np.linalg.norm(u) < 1e-9:
+                continue
+            dr = parts.ms.Lambda_r_t @ u
+            assert exact.contains(dr) == oracle.test(dr).member, (c, dr)
+            checked += 1
+    assert checked >= 30
