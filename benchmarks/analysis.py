@@ -11,9 +11,9 @@ scaling with the number of contacts (the wrap scene restricted to its first L co
 from __future__ import annotations
 
 import argparse
-import resource
 import os
 import platform
+import resource
 import statistics
 import sys
 import time
