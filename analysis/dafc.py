@@ -231,11 +231,13 @@ class DAFCOracle:
 
     # -- membership -----------------------------------------------------------------------------
 
-    def test(self, dr: Array, zeta_r: Array | None = None, screen: bool = True) -> DirectionTest:
+    def test(self, dr: Array, zeta_r: Array | None = None, screen: bool = True, quick: bool = False) -> DirectionTest:
         """Is the object direction ``dr`` (any scale, in the motion space) in DAFC?
 
         ``screen``: with S-points, first try to prove non-membership with the relaxation
-        (:meth:`relaxed_work_sup`), which is exact when it says no.
+        (:meth:`relaxed_work_sup`), which is exact when it says no. ``quick``: when the slips
+        depend on the redundancy, try only the friction-aligned and the least-L1 redundancies
+        (not the seeded random ones).
         """
         ms = self.ms
         dr = np.asarray(dr, dtype=float)
@@ -262,7 +264,7 @@ class DAFCOracle:
                 return DirectionTest(dr, u, None, False, np.nan, "not allowable: a D-point would penetrate",
                                      True)
             if self.slip_depends_on_redundancy:
-                alts = self._alternative_redundancies(u, z0)
+                alts = self._alternative_redundancies(u, z0, count=0 if quick else 4)
                 candidates.extend(alts[:1])
                 candidates.append(z0)
                 candidates.extend(alts[1:])
@@ -444,10 +446,11 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     """Decide whether DAFC is empty; return (a member or None, dim DAFC, exact).
 
     Without S-points: test the generators of the allowable cone; exact (see :class:`DAFCSet`).
-    With S-points: (1) the relaxation with free friction directions is tested on the generators,
-    which proves emptiness exactly when none does positive work; (2) otherwise seeded interior
-    samples of the cone (centroid first) and then the generators are tested exactly, stopping at
-    the first member. A member in the relative interior of ``A_r`` has a neighbourhood of
+    With S-points: (0) the centroid of the cone and seeded interior samples are tested exactly
+    (friction-aligned and least-L1 redundancy), stopping at the first member; (1) failing that,
+    the relaxation with free friction directions is tested on the generators, which proves
+    emptiness exactly when none does positive work; (2) otherwise the generators are tested with
+    the full redundancy search. A member in the relative interior of ``A_r`` has a neighbourhood of
     members in ``A_r`` (the slips and the LP data vary continuously), so DAFC then has the
     dimension of ``A_r``; a member found only on the boundary gives the rank of the members.
     These answers are marked ``exact = False`` (a local search over slips and redundancy).
@@ -467,14 +470,18 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
             if t.member:
                 return t, cone_dim, True
         return None, 0, True
-    # (0) the centroid of the cone, the likeliest member
+    # (0) the centroid of the cone (the likeliest member), then seeded interior samples
     rng = np.random.default_rng(1)
     interior: list[Array] = []
     centroid = dirs.sum(axis=0)
     if np.linalg.norm(centroid) > 1e-9:
         interior.append(centroid / np.linalg.norm(centroid))
+    for _ in range(extra_samples):
+        v = rng.random(len(dirs)) @ dirs
+        if np.linalg.norm(v) > 1e-9:
+            interior.append(v / np.linalg.norm(v))
     for u in interior:
-        t = oracle.test(ms.Lambda_r_t @ u, screen=False)
+        t = oracle.test(ms.Lambda_r_t @ u, screen=False, quick=True)
         if t.member:
             return t, cone_dim, False
     # (1) relaxation: exact emptiness certificate
@@ -482,16 +489,6 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     positive = [u for u in generators if oracle.relaxed_work_sup(ms.Lambda_r_t @ u) > WORK_TOL * scale]
     if not positive:
         return None, 0, True
-    # (2) more interior samples, then the generators with positive relaxed work
-    interior = []
-    for _ in range(extra_samples):
-        v = rng.random(len(dirs)) @ dirs
-        if np.linalg.norm(v) > 1e-9:
-            interior.append(v / np.linalg.norm(v))
-    for u in interior:
-        t = oracle.test(ms.Lambda_r_t @ u)
-        if t.member:
-            return t, cone_dim, False
     members: list[Array] = []
     best: DirectionTest | None = None
     for u in positive:
