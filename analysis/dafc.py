@@ -89,7 +89,6 @@ class DAFCOracle:
         self.exact = not self.slip_depends_on_redundancy
         self._lp: LPModel | None = None
         self._relaxed: LPModel | None = None
-        self._slp: LPModel | None = None
         self._G_relaxed = np.zeros((system.D, 0))
         self._d = d
         self.lp_count = 0
@@ -175,7 +174,11 @@ class DAFCOracle:
         assert res.objective is not None
         return float(res.objective + dr @ self.system.w_ex)
 
-    def _fixed_lp(self) -> LPModel:
+    def _force_lp(self) -> LPModel:
+        """The force LP of (22), built once per combination: friction rows and the passive
+        equalities ``Xi^T G_c f_c = -Xi^T w_ex``. With S-points only the S columns of the
+        equality rows change with the slips (``Xi^T G_eff``); they are overwritten in place per
+        motion, so every solve is warm-started."""
         if self._lp is None:
             st, fs = self.st, self.fs
             self._lp = LPModel(
@@ -187,20 +190,6 @@ class DAFCOracle:
             )
         return self._lp
 
-    def _s_model(self) -> LPModel:
-        """One LP for every motion of an S combination: only the S columns of the equality
-        rows ``Xi^T G_eff`` change with the slips, and are overwritten in place (warm start)."""
-        if self._slp is None:
-            st, fs = self.st, self.fs
-            self._slp = LPModel(
-                st.G_c.shape[1],
-                A_ub=fs.C,
-                b_ub=np.zeros(fs.C.shape[0]),
-                A_eq=self.Xi.T @ st.G_c,  # S columns are overwritten per motion (changeCoeff inserts)
-                b_eq=-(self.Xi.T @ self.system.w_ex),
-            )
-        return self._slp
-
     def work_sup(self, dr: Array, zeta_c: Array) -> tuple[float, Array | None]:
         """``sup dr^T (G_c f + w_s + w_ex)`` over the admissible forces for the motion ``zeta_c``."""
         st = self.st
@@ -208,12 +197,12 @@ class DAFCOracle:
         if st.G_c.shape[1] == 0:  # no contact carries force (all D): only w_ex can do work
             return float(dr @ w_ex), np.zeros(0)
         if not self.sel.s_index:
-            model = self._fixed_lp()
+            model = self._force_lp()
             G_eff = st.G_c
         else:
             kf = kinetic_friction(self.system, self.sel, self.slips_of(zeta_c))
             G_eff = st.G_c + kf.G_w
-            model = self._s_model()
+            model = self._force_lp()
             s_cols = np.array([self.sel.c_slices[i].start for i in self.sel.s_index])
             E = self.Xi.T @ G_eff[:, s_cols]  # (p, #S)
             rows, cols = np.indices(E.shape)
