@@ -438,8 +438,8 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     With S-points: (0) the centroid of the cone and seeded interior samples are tested exactly
     (friction-aligned and least-L1 redundancy), stopping at the first member; (1) failing that,
     the relaxation with free friction directions is tested on the generators, which proves
-    emptiness exactly when none does positive work; (2) otherwise the generators are tested with
-    the full redundancy search. A member in the relative interior of ``A_r`` has a neighbourhood of
+    emptiness exactly when none does positive work; (2) otherwise the samples and then the
+    generators are tested with the full redundancy search. A member in the relative interior of ``A_r`` has a neighbourhood of
     members in ``A_r`` (the slips and the LP data vary continuously), so DAFC then has the
     dimension of ``A_r``; a member found only on the boundary gives the rank of the members.
     These answers are marked ``exact = False`` (a local search over slips and redundancy).
@@ -453,7 +453,9 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
         return None, 0, True
     cone_dim = int(np.linalg.matrix_rank(dirs, tol=1e-9))
     generators = list(_dedupe(dirs))
-    if not oracle.sel.s_index:
+    if not oracle.sel.s_index or (oracle.exact and ms.a_bar == 1):
+        # without S-points: A_r minus a convex cone, decided on the generators; with a_bar = 1 the
+        # only directions are the (at most two) generators, each decided by the exact oracle
         for u in generators:
             t = oracle.test(ms.Lambda_r_t @ u)
             if t.member:
@@ -478,6 +480,11 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     positive = [u for u in generators if oracle.relaxed_work_sup(ms.Lambda_r_t @ u) > WORK_TOL * scale]
     if not positive:
         return None, 0, True
+    # (2) the interior samples again with the full redundancy search, then the generators
+    for u in interior:
+        t = oracle.test(ms.Lambda_r_t @ u, screen=False)
+        if t.member:
+            return t, cone_dim, False
     members: list[Array] = []
     best: DirectionTest | None = None
     for u in positive:
