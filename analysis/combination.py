@@ -187,15 +187,18 @@ def _list(a: Array) -> Any:
 
 
 def _realisable_candidates(
-    parts: CombinationParts, oracle: DAFCOracle, target: Array, dset: DAFCSet | None, limit: int = 40
+    parts: CombinationParts, oracle: DAFCOracle, target: Array, dset: DAFCSet | None, limit: int = 5
 ) -> list[Array]:
     """Directions to try for the default torque set when the example direction has none.
 
     A DAFC direction only guarantees positive work; T also needs the net wrench in the motion
-    space parallel to the motion (W_3 of eq. 30). The net wrench of the oracle's maximising
-    forces is such a direction for the same contact forces, so it is tried first, then the
-    sampled DAFC members in order of work.
+    space parallel to the motion (W_3 of eq. 30). The net wrench of the oracle's certificate
+    forces is such a direction for the same forces (exactly so without S-points), so it is tried
+    first; then a direction from the NLP that makes the net wrench parallel to the motion
+    (:func:`analysis.torques.realisable_direction`); then sampled DAFC members, bounded work first.
     """
+    from analysis.torques import realisable_direction
+
     out: list[Array] = []
     t = oracle.test(target)
     if t.member and t.forces is not None and t.zeta_c is not None:
@@ -208,6 +211,13 @@ def _realisable_candidates(
         k = parts.ms.Lambda_r_t @ (parts.ms.Lambda_r_t.T @ w)
         if np.linalg.norm(k) > 1e-9:
             out.append(k / np.linalg.norm(k))
+        if parts.sel.s_index:
+            try:
+                v = realisable_direction(parts.system, parts.sel, parts.ms, parts.st, parts.fs, t)
+            except CTPError:
+                v = None
+            if v is not None:
+                out.append(v)
     if dset is not None:
         # bounded work first (largest first): an unbounded supremum often means the net wrench
         # can grow without being parallel to the motion, which T (W_3) excludes

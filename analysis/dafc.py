@@ -212,11 +212,22 @@ class DAFCOracle:
         res = model.solve(G_eff.T @ dr, maximize=True)
         self.lp_count += 1
         if res.status == "unbounded":
-            return np.inf, None
+            return np.inf, self._witness(G_eff, dr)
         if res.status == "infeasible":
             return -np.inf, None
         assert res.objective is not None
         return float(res.objective + dr @ w_ex), res.x
+
+    def _witness(self, G_eff: Array, dr: Array) -> Array | None:
+        """Forces with work exactly ``1 + |w_ex|`` when the supremum is unbounded (a certificate)."""
+        st, fs = self.st, self.fs
+        w_ex = self.system.w_ex
+        c = G_eff.T @ dr
+        target = 1.0 + float(np.linalg.norm(w_ex)) - float(dr @ w_ex)
+        res = solve_lp(np.zeros(len(c)), A_ub=fs.C, b_ub=np.zeros(fs.C.shape[0]),
+                       A_eq=np.vstack([self.Xi.T @ G_eff, c[None, :]]),
+                       b_eq=np.concatenate([-(self.Xi.T @ w_ex), [target]]))
+        return res.x if res.found else None
 
     # -- membership -----------------------------------------------------------------------------
 

@@ -30,7 +30,7 @@ from analysis.exceptions import EmptyTorqueSet, NotInDAFC
 from analysis.friction import FrictionSet, KineticFriction, kinetic_friction
 from analysis.linalg import null_space, rank
 from analysis.motion import MotionSpace
-from analysis.solvers.casadi_nlp import RedundancyNLP, solve_redundancy
+from analysis.solvers.casadi_nlp import RedundancyNLP, solve_realisable_direction, solve_redundancy
 from analysis.solvers.cdd import Generators, polyhedron_generators, reduce_generators
 from analysis.solvers.highs import solve_lp
 from analysis.statics import Statics
@@ -83,19 +83,13 @@ class TorqueSet:
         }
 
 
-def _chosen_motion(
-    oracle: DAFCOracle, system: GraspSystem, sel: Selection, ms: MotionSpace, st: Statics, fs: FrictionSet,
-    u: Array, start: DirectionTest | None = None,
-) -> tuple[Array, str, float]:
-    """Problem (31): the redundancy minimising phi; returns (zeta_c, IPOPT status, phi)."""
-    r = ms.n_redundant
+def _nlp_data(
+    system: GraspSystem, sel: Selection, ms: MotionSpace, st: Statics, fs: FrictionSet, u: Array, with_forces: bool
+) -> RedundancyNLP:
+    """The data of problem (31) for the unit direction ``u``."""
     a_bar = ms.a_bar
-    if r == 0:
-        zc = ms.zeta_c(u)
-        return zc, "no redundancy", float(np.linalg.norm(ms.Lambda_q_t @ u))
     d = system.d
-    s_cols = tuple(sel.c_slices[i].start for i in sel.s_index)
-    p = RedundancyNLP(
+    return RedundancyNLP(
         u=u,
         N_u=null_space(u[None, :]) if a_bar > 1 else np.zeros((a_bar, 0)),
         Lambda_q_t=ms.Lambda_q_t,
@@ -106,12 +100,37 @@ def _chosen_motion(
         C=fs.C,
         G_c=st.G_c,
         G_s_blocks=np.array([system.G_blocks[i] for i in sel.s_index]).reshape(len(sel.s_index), system.D, d),
-        s_cols=s_cols,
+        s_cols=tuple(sel.c_slices[i].start for i in sel.s_index),
         mu_s=np.array([system.mu[i] for i in sel.s_index]),
         Xi=st.Xi,
         w_ex=system.w_ex,
-        with_forces=oracle.slip_depends_on_redundancy,
+        with_forces=with_forces,
     )
+
+
+def realisable_direction(
+    system: GraspSystem, sel: Selection, ms: MotionSpace, st: Statics, fs: FrictionSet, start: DirectionTest
+) -> Array | None:
+    """A DAFC direction whose torque set is not empty, searched with IPOPT from the DAFC
+    certificate ``start`` (see :func:`analysis.solvers.casadi_nlp.solve_realisable_direction`)."""
+    if start.zeta_c is None or start.forces is None or ms.a_bar == 0:
+        return None
+    p = _nlp_data(system, sel, ms, st, fs, start.u, with_forces=True)
+    res = solve_realisable_direction(p, start.u, start.zeta_c[ms.a_bar :], start.forces)
+    return ms.Lambda_r_t @ res.u if res.found else None
+
+
+def _chosen_motion(
+    oracle: DAFCOracle, system: GraspSystem, sel: Selection, ms: MotionSpace, st: Statics, fs: FrictionSet,
+    u: Array, start: DirectionTest | None = None,
+) -> tuple[Array, str, float]:
+    """Problem (31): the redundancy minimising phi; returns (zeta_c, IPOPT status, phi)."""
+    r = ms.n_redundant
+    a_bar = ms.a_bar
+    if r == 0:
+        zc = ms.zeta_c(u)
+        return zc, "no redundancy", float(np.linalg.norm(ms.Lambda_q_t @ u))
+    p = _nlp_data(system, sel, ms, st, fs, u, with_forces=oracle.slip_depends_on_redundancy)
     z0 = oracle.redundancy_for(u)
     res = solve_redundancy(p, zeta0=z0)
     if not res.found and start is not None and start.zeta_c is not None:

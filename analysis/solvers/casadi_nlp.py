@@ -142,3 +142,85 @@ def solve_redundancy(
     if status in ("Maximum_Iterations_Exceeded", "Maximum_CpuTime_Exceeded"):
         return RedundancyResult(False, status, zeta, f_c, phi)
     raise SolverError("IPOPT", f"problem (31) ended with status '{status}'")
+
+
+@dataclass(frozen=True)
+class RealisableResult:
+    found: bool
+    status: str
+    u: Array  # (a_bar,) unit direction whose net wrench is parallel to it
+    zeta_r: Array  # (r,)
+    f_c: Array  # (L_c,)
+
+
+def solve_realisable_direction(
+    p: RedundancyNLP, u0: Array, zeta0: Array, f0: Array, max_iter: int = 300
+) -> RealisableResult:
+    """Find a DAFC direction in which T (32) is not empty: the set S of (30) with the direction
+    itself free, i.e. ``u`` (unit), ``dzeta~_r``, ``f_c`` and ``lambda >= w_min`` with
+
+        Lambda~_r^T w = lambda u,  Xi^T w = 0,  f_c in F,  A_d Phi_full [u; dzeta~_r] <= 0,
+        |slip_i| >= delta,   w = G_c f_c - sum_i mu_i n_i G_i slip_i/|slip_i| + w_ex,
+
+    minimising ``phi^2`` as (31), started from a DAFC certificate ``(u0, zeta0, f0)``. The data
+    of ``p`` other than ``u`` and ``N_u`` are used. IPOPT is a local solver: ``found = False``
+    does not prove that no such direction exists.
+    """
+    r = p.Lambda_qr_t.shape[1]
+    L_c = p.C.shape[1]
+    a_bar = p.Lambda_r_t.shape[1]
+    d = p.G_s_blocks.shape[2] if p.G_s_blocks.size else 0
+    x = ca.SX.sym("x", a_bar + r + L_c + 1)
+    u, z, f, lam = x[:a_bar], x[a_bar : a_bar + r], x[a_bar + r : a_bar + r + L_c], x[-1]
+    zc = ca.vertcat(u, z)
+    dq = ca.DM(p.Lambda_q_t) @ u + ca.DM(p.Lambda_qr_t) @ z
+    obj = ca.sumsqr(dq) + 1e-6 * ca.sumsqr(f)
+    g: list[ca.SX] = [ca.sumsqr(u)]
+    lbg: list[float] = [1.0]
+    ubg: list[float] = [1.0]
+    if p.B.shape[0]:
+        g.append(ca.DM(p.B) @ zc)
+        lbg += [-np.inf] * p.B.shape[0]
+        ubg += [0.0] * p.B.shape[0]
+    g.append(ca.DM(p.C) @ f)
+    lbg += [-np.inf] * p.C.shape[0]
+    ubg += [0.0] * p.C.shape[0]
+    w = ca.DM(p.G_c) @ f + ca.DM(p.w_ex)
+    slip_all = ca.DM(p.P_s) @ zc
+    for k, col in enumerate(p.s_cols):
+        s = slip_all[k * d : (k + 1) * d]
+        nrm2 = ca.sumsqr(s)
+        g.append(nrm2)
+        lbg.append(p.slip_min**2)
+        ubg.append(np.inf)
+        w = w - p.mu_s[k] * f[col] * (ca.DM(p.G_s_blocks[k]) @ (s / ca.sqrt(nrm2 + 1e-12)))
+    if p.Xi.shape[1]:
+        g.append(ca.DM(p.Xi.T) @ w)
+        lbg += [0.0] * p.Xi.shape[1]
+        ubg += [0.0] * p.Xi.shape[1]
+    g.append(ca.DM(p.Lambda_r_t.T) @ w - lam * u)
+    lbg += [0.0] * a_bar
+    ubg += [0.0] * a_bar
+    g.append(lam)
+    lbg.append(p.w_min)
+    ubg.append(np.inf)
+    opts: dict[str, Any] = {
+        "ipopt.print_level": 0,
+        "print_time": 0,
+        "ipopt.sb": "yes",
+        "ipopt.max_iter": max_iter,
+        "ipopt.tol": 1e-10,
+        "ipopt.constr_viol_tol": 1e-9,
+        "error_on_fail": False,
+    }
+    try:
+        solver = ca.nlpsol("realisable", "ipopt", {"x": x, "f": obj, "g": ca.vertcat(*g)}, opts)
+        wr0 = p.Lambda_r_t.T @ (p.G_c @ f0 + p.w_ex)
+        x0 = np.concatenate([u0, zeta0, f0, [max(float(u0 @ wr0), p.w_min)]])
+        sol = solver(x0=x0, lbg=np.array(lbg), ubg=np.array(ubg))
+    except RuntimeError as e:
+        raise SolverError("IPOPT", str(e)) from e
+    status = str(solver.stats().get("return_status", "unknown"))
+    xs = np.asarray(sol["x"], dtype=float).ravel()
+    un = xs[:a_bar] / max(1e-12, float(np.linalg.norm(xs[:a_bar])))
+    return RealisableResult(status in _OK, status, un, xs[a_bar : a_bar + r], xs[a_bar + r : a_bar + r + L_c])
