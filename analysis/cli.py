@@ -284,6 +284,81 @@ def simulate(
 
 
 @app.command()
+def plan(
+    scene: Annotated[Path, typer.Argument(help="scene file (.json, .yaml)")],
+    goal: Annotated[str, typer.Option(help="active | passive | combination | pose")] = "active",
+    combination: Annotated[str | None, typer.Option(help="goal combination, e.g. FSDD (--goal combination)")] = None,
+    pose: Annotated[str | None, typer.Option(help="goal pose: 2-D 'x y theta', 3-D 'x y z rx ry rz'")] = None,
+    tolerance: Annotated[float, typer.Option(help="pose tolerance (scene units and radians)")] = 0.05,
+    time_limit: Annotated[float | None, typer.Option(help="seconds for the search")] = None,
+    out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
+    replay: Annotated[bool, typer.Option(help="replay the plan step by step in MuJoCo")] = False,
+) -> None:
+    """Plan contact-state transitions to a goal closure (the planner of issue 3)."""
+    from pydantic import ValidationError
+
+    from planner import Goal
+    from planner import plan as make_plan  # lazy: analysis does not depend on planner
+
+    sc = _load(scene)
+    try:
+        g = Goal(type=goal, combination=combination,
+                 pose=None if pose is None else [float(x) for x in _parse_vector(pose, "pose")],
+                 tolerance=tolerance)
+    except ValidationError as e:
+        _fail(f"goal: {e.errors()[0]['msg']}")
+    with Progress(TextColumn("[bold]planning"), BarColumn(), TextColumn("{task.description}"),
+                  TimeElapsedColumn(), console=err_console, transient=True) as bar:
+        task = bar.add_task("", total=1.0)
+
+        def step(fraction: float, message: str) -> None:
+            bar.update(task, completed=fraction, description=message[:60])
+
+        try:
+            result = make_plan(sc, g, progress=step, time_limit=time_limit)
+        except SceneError as e:
+            _fail(str(e))
+        except CTPError as e:
+            _fail(str(e), code=1)
+    if not result.found:
+        console.print(f"[bold red]no plan:[/] {result.reason}", highlight=False)
+    else:
+        table = Table(title=f"plan: {len(result.steps)} steps, cost {result.cost:.3f}")
+        for col in ("step", "kind", "combination", "contacts after", "cost"):
+            table.add_column(col)
+        for st in result.steps:
+            t = st.transition
+            table.add_row(str(st.index), t.kind, t.combination, ", ".join(t.contacts_after), f"{t.cost:.3f}")
+        console.print(table)
+        console.print(f"object displacement {_fmt(result.displacement)}; "
+                      f"{result.stats.nodes_expanded} nodes expanded in {result.stats.seconds_total:.2f} s")
+    data = result.to_json()
+    if replay and result.found:
+        from planner.replay import replay_plan
+
+        rp = replay_plan(sc, result)
+        for s in rp.steps:
+            console.print(f"replay step {s.index} {s.kind}: {'ok' if s.ok else 'FAILED'} ({s.note})", highlight=False)
+        console.print(f"replay: simulated displacement {_fmt(rp.simulated)} vs planned {_fmt(rp.planned)}; "
+                      f"relative error {rp.relative_error:.3%}; dropped: {rp.dropped}", highlight=False)
+        data["replay"] = {"relative_error": rp.relative_error, "dropped": rp.dropped, "ok": rp.ok,
+                          "simulated": rp.simulated.tolist(), "planned": rp.planned.tolist()}
+    if out is not None:
+        out.write_text(json.dumps(data, indent=1))
+        console.print(f"wrote {out}")
+    if not result.found:
+        raise typer.Exit(1)
+
+
+@app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True, "help_option_names": []})
+def batch(ctx: typer.Context) -> None:
+    """Plan (--goal) or enumerate (--enumerate) every scene of a folder; resumable; processes or Ray."""
+    from api.batch import main as batch_main  # the service package owns it (api imports analysis)
+
+    batch_main(ctx.args)
+
+
+@app.command()
 def schema(out: Annotated[Path | None, typer.Option(help="write to a file instead of stdout")] = None) -> None:
     """Print the JSON Schema of the scene format."""
     from analysis.scene import scene_json_schema

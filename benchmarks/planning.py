@@ -1,0 +1,77 @@
+"""Speed of the contact-state planner (issue 3). Prints figures and the machine.
+
+    .venv/bin/python benchmarks/planning.py                 # planar example (target < 5 s)
+    .venv/bin/python benchmarks/planning.py --sphere        # also the 3-D sphere (target < 30 s)
+    .venv/bin/python benchmarks/planning.py --repeat 3
+
+For each scene: whether a plan to active closure was found, its steps, nodes expanded and
+generated, lazy edges checked, and the time split between the closure analysis, OMPL (transfer
+planning and certified collision checks), IK (CasADi), object-motion integration and the rest
+(graph search and bookkeeping).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import statistics
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from analysis.scene import load_scene  # noqa: E402
+from planner import Goal, plan  # noqa: E402
+
+
+def machine() -> str:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}; {os.cpu_count()} logical cores; {platform.system()} {platform.release()}; " \
+           f"python {platform.python_version()}"
+
+
+def run(name: str, target: float, repeat: int, time_limit: float | None) -> None:
+    scene = load_scene(ROOT / "examples" / f"{name}.json")
+    totals = []
+    last = None
+    for _ in range(repeat):
+        p = plan(scene, Goal(type="active"), time_limit=time_limit)
+        totals.append(p.stats.seconds_total)
+        last = p
+    assert last is not None
+    s = last.stats
+    print(f"\n{name}: found={last.found} steps={len(last.steps)} "
+          f"({', '.join(st.transition.kind for st in last.steps)})")
+    if not last.found:
+        print(f"  reason: {last.reason}")
+    print(f"  time to plan: median {statistics.median(totals):.2f} s over {repeat} run(s) "
+          f"(target < {target:.0f} s: {'met' if statistics.median(totals) < target else 'NOT met'})")
+    print(f"  nodes expanded {s.nodes_expanded}, generated {s.nodes_generated}, lazy edges checked "
+          f"{s.lazy_edges_checked}")
+    print(f"  analysis {s.seconds_analysis:.2f} s | OMPL {s.seconds_ompl:.2f} s | IK {s.seconds_ik:.2f} s | "
+          f"object motion {s.seconds_motion:.2f} s | search+rest {s.seconds_search:.2f} s")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--sphere", action="store_true", help="also plan for sphere_four_finger_palm")
+    ap.add_argument("--time-limit", type=float, default=None)
+    args = ap.parse_args()
+    print("machine:", machine())
+    run("planar_disk_envelope", 5.0, args.repeat, args.time_limit)
+    if args.sphere:
+        run("sphere_four_finger_palm", 30.0, args.repeat, args.time_limit or 120.0)
+
+
+if __name__ == "__main__":
+    main()

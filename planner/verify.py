@@ -1,0 +1,98 @@
+"""Independent re-check of a plan's steps by the closure analysis (no planner caches).
+
+For every step the states before and after are rebuilt as scenes (which validates that every
+contact point lies on its body and on the object) and:
+
+* ``release`` (33): the stationary grasp (18) of the remaining contacts exists and the first
+  finger motion of the step separates every released contact (``J_d dq < 0``) while keeping the
+  others (``J_c dq = 0`` to first order);
+* ``contact`` (33): the new grasp has a stationary grasp (18) and the finger path is
+  collision-free (certified);
+* ``object_motion`` (30-32): the combination has a stationary grasp, the direction is a DAFC
+  member (22 by the LP oracle), the torque set (32) for it is not empty, and the chosen torque's
+  contact forces satisfy (32) (residuals);
+* every state after a step holds the object (18 for all-F).
+
+:func:`verify_plan` returns the list of problems (empty when every step passes).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from analysis.contacts import build_system
+from analysis.exceptions import CTPError
+from analysis.kinematics import BodyRef, HandKinematics
+from analysis.scene import Scene
+from analysis.torques import torque_set
+from planner.ompl_paths import CollisionModel, path_clearance_certified
+from planner.plan import Plan, PlanStep
+from planner.state import StateAnalysis, all_f
+
+
+def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]:
+    problems: list[str] = []
+    t = step.transition
+    tag = f"step {step.index} ({t.kind})"
+    try:
+        before = StateAnalysis.of(scene, step.before, hand)
+        after = StateAnalysis.of(scene, step.after, hand)
+    except CTPError as e:
+        return [f"{tag}: state is not a valid scene: {e}"]
+    if after.stationary(all_f(step.after)) is None:
+        problems.append(f"{tag}: the grasp after the step has no stationary grasp (18)")
+    if t.kind == "release":
+        if before.stationary(t.combination) is None:
+            problems.append(f"{tag}: no stationary grasp (18) of the remaining contacts")
+        dq = t.q_path[1] - t.q_path[0]
+        sy = build_system(before.scene, hand, step.before.q)
+        for i, letter in enumerate(t.combination):
+            rate = float(sy.normals[i] @ (sy.J_blocks[i] @ dq))  # A_d [dq; 0] for a D-point
+            if letter == "D" and not rate < 0.0:
+                problems.append(f"{tag}: released contact {i} does not separate (n^T J dq = {rate:.3g})")
+            if letter == "F" and np.linalg.norm(sy.J_blocks[i] @ dq) > 1e-6 + 1e-3 * np.linalg.norm(dq):
+                problems.append(f"{tag}: kept contact {i} moves")
+    elif t.kind == "contact":
+        if before.stationary(all_f(step.before)) is None:
+            problems.append(f"{tag}: no stationary grasp (18) while the finger moves")
+        model = CollisionModel.of(scene, hand)
+        moved = np.flatnonzero(np.any(np.abs(np.diff(t.q_path, axis=0)) > 0, axis=0))
+        fingers = {f for f in range(len(hand.fingers))
+                   for j in moved if j in range(*hand.finger_slice(f).indices(hand.M))}
+        for f in fingers:
+            sl = hand.finger_slice(f)
+            chain = hand.fingers[f]
+            tip = BodyRef(f"{chain.name}/{chain.n_joints - 1}", f, chain.n_joints - 1)
+            ok, clear, _ = path_clearance_certified(model, f, step.before.q, t.q_path[:, sl], step.before.position,
+                                                    step.before.rotation, [tip], len(t.q_path) - 2)
+            if not ok:
+                problems.append(f"{tag}: finger path collides (clearance {clear:.3g})")
+    elif t.kind == "object_motion":
+        grasp = before.stationary(t.combination)
+        if grasp is None:
+            return [*problems, f"{tag}: no stationary grasp (18) for {t.combination}"]
+        p = before.parts(t.combination)
+        oracle = p.oracle()
+        assert t.torque_set is not None
+        direction = np.asarray(t.torque_set["direction"], float)
+        test = oracle.test(direction)
+        if not test.member:
+            problems.append(f"{tag}: direction not in DAFC (22): {test.reason}")
+        else:
+            try:
+                ts = torque_set(p.system, p.sel, p.ms, p.st, p.fs, grasp, direction, oracle=oracle)
+                res = ts.residuals(ts.f_c)
+                if res["inequality"] > 1e-6 or res.get("equality", 0.0) > 1e-6:
+                    problems.append(f"{tag}: chosen torque violates (32): {res}")
+            except CTPError as e:
+                problems.append(f"{tag}: torque set (32) empty: {e}")
+    return problems
+
+
+def verify_plan(scene: Scene, plan: Plan) -> list[str]:
+    """Problems found when re-checking every step of ``plan`` (empty: the plan passes)."""
+    hand = HandKinematics.from_scene(scene)
+    out: list[str] = []
+    for step in plan.steps:
+        out.extend(verify_step(scene, hand, step))
+    return out

@@ -1,0 +1,21 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from analysis.scene import Scene, load_scene
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+
+
+@pytest.fixture(scope="session")
+def planar_scene() -> Scene:
+    return load_scene(EXAMPLES / "planar_disk_envelope.json")
+
+
+@pytest.fixture(scope="session")
+def planar_plan(planar_scene: Scene):  # type: ignore[no-untyped-def]
+    from planner import Goal, plan
+
+    return plan(planar_scene, Goal(type="active"))

@@ -1,0 +1,108 @@
+"""Collision model, IK, OMPL transfers (checked every 1 mm of joint motion) and object motion."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from analysis.kinematics import BodyRef, HandKinematics
+from analysis.scene import Scene
+from planner.ompl_paths import (
+    DENSE_STEP,
+    CollisionModel,
+    fingertip_ik,
+    plan_transfer,
+    segment_segment_distance,
+)
+from planner.state import state_from_scene
+
+
+def test_segment_distance_matches_sampling() -> None:
+    rng = np.random.default_rng(0)
+    t = np.linspace(0, 1, 401)
+    for _ in range(30):
+        a0, a1, b0, b1 = rng.normal(size=(4, 3))
+        P = a0 + t[:, None] * (a1 - a0)
+        Q = b0 + t[:, None] * (b1 - b0)
+        brute = np.min(np.linalg.norm(P[:, None] - Q[None], axis=2))
+        d = segment_segment_distance(a0, a1, b0, b1)
+        assert d <= brute + 1e-12 and d >= brute - 1e-2
+
+
+def _free_left(planar_scene: Scene):  # type: ignore[no-untyped-def]
+    hand = HandKinematics.from_scene(planar_scene)
+    st = state_from_scene(planar_scene, hand)
+    q = st.q.copy()
+    q[:2] = [2.0, 0.3]  # left finger lifted away
+    return hand, st.with_contacts(st.contacts[2:], q)
+
+
+def test_ik_puts_the_tip_on_the_target(planar_scene: Scene) -> None:
+    hand, st = _free_left(planar_scene)
+    target, normal = np.array([-0.5, 0.5]), np.array([1.0, 0.0])
+    sols = fingertip_ik(hand, 0, target, normal, [st.q[:2]])
+    assert sols
+    q = st.q.copy()
+    q[:2] = sols[0]
+    a, b = hand.body_segment(BodyRef("left/1", 0, 1), q)
+    np.testing.assert_allclose(b, target, atol=1e-7)
+    assert (b - a) @ normal / np.linalg.norm(b - a) >= 0.5 - 1e-9
+
+
+def _dense_check(model: CollisionModel, finger: int, q_full: np.ndarray, path: np.ndarray, st,  # type: ignore[no-untyped-def]
+                 touch_from: int, tip: BodyRef) -> float:
+    """Every 1 mm (1e-3 rad) of joint motion, independent of the planner's certificate."""
+    sl = model.hand.finger_slice(finger)
+    q = q_full.copy()
+    worst = np.inf
+    for s in range(len(path) - 1):
+        n = max(2, int(np.ceil(np.linalg.norm(path[s + 1] - path[s]) / DENSE_STEP)) + 1)
+        for t in np.linspace(0.0, 1.0, n):
+            q[sl] = path[s] + t * (path[s + 1] - path[s])
+            touching = [tip] if s >= touch_from else []
+            worst = min(worst, model.finger_clearance(finger, q, st.position, st.rotation, touching))
+    return float(worst)
+
+
+def test_transfer_is_collision_free_every_millimetre(planar_scene: Scene) -> None:
+    hand, st = _free_left(planar_scene)
+    model = CollisionModel.of(planar_scene, hand)
+    tip = BodyRef("left/1", 0, 1)
+    sols = fingertip_ik(hand, 0, np.array([-0.5, 0.5]), np.array([1.0, 0.0]), [st.q[:2]])
+    path = plan_transfer(model, st, 0, sols[0], tip, 0.05, seed=3)
+    assert path is not None
+    np.testing.assert_allclose(path.waypoints[0], st.q[:2])
+    np.testing.assert_allclose(path.waypoints[-1], sols[0])
+    assert _dense_check(model, 0, st.q, path.waypoints, st, len(path.waypoints) - 2, tip) >= 0.0
+    again = plan_transfer(model, st, 0, sols[0], tip, 0.05, seed=3)
+    assert again is not None and np.allclose(again.waypoints, path.waypoints)  # seeded
+
+
+def test_clearance_detects_penetration(planar_scene: Scene) -> None:
+    hand, st = _free_left(planar_scene)
+    model = CollisionModel.of(planar_scene, hand)
+    q = st.q.copy()
+    q[:2] = [1.0, 0.0]  # link 0 through the disk
+    assert model.finger_clearance(0, q, st.position, st.rotation) < 0.0
+    q[:2] = [0.0, 0.0]  # the finger lies on the palm
+    assert model.finger_clearance(0, q, st.position, st.rotation) < 0.0
+
+
+def test_object_motion_stays_on_the_contact_manifold(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
+    """The lift of the planar plan: at every waypoint the sticking contacts coincide (A_c [dq; dr]
+    = 0 integrated and projected) and the palm contact has separated at the end."""
+    from planner.ompl_paths import moved
+
+    hand = HandKinematics.from_scene(planar_scene)
+    step = next(s for s in planar_plan.steps if s.transition.kind == "object_motion")
+    t, before = step.transition, step.before
+    sticking = [i for i, ch in enumerate(t.combination) if ch == "F"]
+    assert sticking and "D" in t.combination
+    for q, pose in zip(t.q_path, t.object_path, strict=True):
+        st = moved(before, pose - before.pose_vector())
+        for i in sticking:
+            c = before.contacts[i]
+            ref = hand.resolve_body(c.body)
+            assert ref is not None
+            np.testing.assert_allclose(hand.point_position(ref, c.point_body, q), st.world_point(i), atol=1e-6)
+    assert np.all(np.asarray(t.figures["separations"]) > 0)
+    assert t.object_path[-1][1] > t.object_path[0][1]  # lifted off the palm

@@ -1,0 +1,117 @@
+"""Plans on the planar enveloping grasp: found, every step passes the analysis, JSON, no-path."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from analysis.exceptions import SceneError
+from analysis.kinematics import HandKinematics
+from analysis.scene import Scene, scene_from_dict
+from planner import Goal, plan
+from planner.graph import closure_is_active
+from planner.state import StateAnalysis, all_f
+from planner.verify import verify_plan
+
+
+def test_planar_plan_reaches_active_closure(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
+    p = planar_plan
+    assert p.found, p.reason
+    kinds = [s.transition.kind for s in p.steps]
+    # Fig. 5: fingers let go while the palm holds, fingertips regrasp, the object is lifted off the palm
+    assert kinds.count("release") >= 2 and kinds.count("contact") >= 2 and kinds[-1] == "object_motion"
+    assert "palm" not in p.final_contacts and len(p.final_contacts) >= 2
+    first = StateAnalysis.of(planar_scene, p.steps[0].before, HandKinematics.from_scene(planar_scene))
+    assert first.summary("FFFFF").a_bar == 0  # starts in passive closure
+    hand = HandKinematics.from_scene(planar_scene)
+    last = StateAnalysis.of(planar_scene, p.steps[-1].after, hand)
+    assert last.parts(all_f(p.steps[-1].after)).ms.a_bar == 3
+    assert closure_is_active(last, all_f(p.steps[-1].after), samples=200)
+    # consecutive steps chain: each starts where the previous ended
+    for a, b in zip(p.steps, p.steps[1:], strict=False):
+        assert a.after.key() == b.before.key()
+        np.testing.assert_allclose(a.transition.q_path[-1], b.transition.q_path[0], atol=1e-9)
+
+
+def test_every_step_passes_the_analysis(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
+    assert verify_plan(planar_scene, planar_plan) == []
+
+
+def test_plan_json(planar_plan, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    data = json.loads(json.dumps(planar_plan.to_json()))
+    assert data["found"] is True and isinstance(data["steps"], list) and data["steps"]
+    for s in data["steps"]:
+        assert {"kind", "combination", "joint_path", "object_path", "torques"} <= set(s)
+        assert s["kind"] in ("release", "contact", "object_motion")
+        assert len(s["joint_path"]) == len(s["object_path"]) >= 2
+    motion = next(s for s in data["steps"] if s["kind"] == "object_motion")
+    assert motion["torques"]["chosen"] is not None and motion["torques"]["set"]["work"] > 0
+    assert data["stats"]["nodes_expanded"] >= 1
+
+
+def test_no_path_is_a_result_naming_the_block(planar_scene: Scene) -> None:
+    p = plan(planar_scene, Goal(type="combination", combination="FFFFFFFFFF"), max_expansions=2)
+    assert not p.found and p.steps == () and "node limit" in p.reason
+
+
+def test_start_without_stationary_grasp(planar_scene: Scene) -> None:
+    data = planar_scene.model_dump(mode="json", exclude_none=True)
+    data["contacts"] = [c for c in data["contacts"] if c["body"] == "palm"]
+    data["external_wrench"] = [1.0, 0.0, 0.0]
+    p = plan(scene_from_dict(data), Goal(type="active"))
+    assert not p.found and "no stationary grasp (18)" in p.reason
+
+
+def test_malformed_input_raises(planar_scene: Scene) -> None:
+    with pytest.raises(SceneError, match=r"goal\.pose"):
+        plan(planar_scene, Goal(type="pose", pose=[0, 0, 0, 0, 0, 0]))
+    with pytest.raises(TypeError):
+        plan(planar_scene, {"type": "active"})  # type: ignore[arg-type]
+    with pytest.raises(SceneError, match="time_limit"):
+        plan(planar_scene, Goal(type="active"), time_limit=-1.0)
+
+
+def test_progress_is_reported(planar_scene: Scene) -> None:
+    seen: list[tuple[float, str]] = []
+    p = plan(planar_scene, Goal(type="combination", combination="FFFFFFFFFF"), max_expansions=3,
+             progress=lambda f, m: seen.append((f, m)))
+    assert not p.found
+    fr = [f for f, _ in seen]
+    assert fr[-1] == 1.0 and all(0.0 <= f <= 1.0 for f in fr) and len(seen) >= 2
+
+
+def test_finger_paths_of_the_plan_are_collision_free_every_millimetre(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
+    from test_ompl_paths import _dense_check
+
+    from analysis.kinematics import BodyRef
+    from planner.ompl_paths import CollisionModel
+
+    hand = HandKinematics.from_scene(planar_scene)
+    model = CollisionModel.of(planar_scene, hand)
+    checked = 0
+    for step in planar_plan.steps:
+        t = step.transition
+        if t.kind != "contact":
+            continue
+        f = next(i for i, ch in enumerate(hand.fingers) if ch.name == t.figures["finger"])
+        chain = hand.fingers[f]
+        tip = BodyRef(f"{chain.name}/{chain.n_joints - 1}", f, chain.n_joints - 1)
+        path = t.q_path[:, hand.finger_slice(f)]
+        assert _dense_check(model, f, step.before.q, path, step.before, len(path) - 2, tip) >= 0.0
+        checked += 1
+    assert checked >= 2
+
+
+def test_passive_goal_holds_at_the_enveloping_grasp(planar_scene: Scene) -> None:
+    p = plan(planar_scene, Goal(type="passive"))
+    assert p.found and p.steps == ()  # the enveloping grasp is already in passive closure
+
+
+def test_pose_goal_moves_the_object_there(planar_scene: Scene) -> None:
+    p = plan(planar_scene, Goal(type="pose", pose=[0.0, 0.55, 0.0], tolerance=0.01))
+    assert p.found, p.reason
+    np.testing.assert_allclose(p.final_pose, [0.0, 0.55, 0.0], atol=0.01)
+    assert [s.transition.kind for s in p.steps].count("object_motion") >= 1
+    assert verify_plan(planar_scene, p) == []
