@@ -63,6 +63,7 @@ def analyze(
     json_out: Annotated[Path | None, typer.Option("--json", help="write everything to this JSON file")] = None,
     plot: Annotated[Path | None, typer.Option(help="draw the scene and DAFC directions (PNG)")] = None,
     feasible_only: Annotated[bool, typer.Option(help="list only feasible combinations")] = False,
+    samples: Annotated[int | None, typer.Option(help="directions sampled for the DAFC set (--combination)")] = None,
     prune_modes: Annotated[bool, typer.Option(help="prune with kinematic contact modes")] = True,
 ) -> None:
     """Closure analysis: every combination (table), or the full report of one."""
@@ -83,7 +84,9 @@ def analyze(
         _fail("direction/nu: need --combination")
     try:
         if combination is not None:
-            report = analyze_combination(system, combination, direction=dvec, nu=nu)
+            if samples is not None and samples < 4:
+                _fail(f"samples: {samples} must be at least 4")
+            report = analyze_combination(system, combination, direction=dvec, nu=nu, samples=samples)
             _print_report(report, sc)
             if json_out:
                 data = {"scene": sc.name, **report.to_json()}

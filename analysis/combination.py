@@ -234,7 +234,7 @@ def analyze_combination(
     combination: str,
     direction: Array | None = None,
     nu: float | None = None,
-    samples: int = 120,
+    samples: int | None = None,
 ) -> CombinationReport:
     """Full report of one combination; ``direction`` picks the motion for the torque set
     (default: the example DAFC direction); ``nu`` adds the friction-uncertainty combination."""
@@ -247,6 +247,8 @@ def analyze_combination(
         grasp = grasp_min = None
     summary = summarize(parts, stationary_known=grasp is not None)
     oracle = parts.oracle()
+    if samples is None:  # the circle/sphere densely, higher-dimensional motion spaces coarsely
+        samples = 120 if ms.a_bar <= 3 else 48
     dset = dafc_set(oracle, samples=samples) if ms.a_bar else None
     dp = dpfc(st, fs, grasp) if grasp is not None else None
     rg = regrasp_cone(sy, sel, ms, st, fs) if grasp is not None else None
