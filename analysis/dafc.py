@@ -220,7 +220,7 @@ class DAFCOracle:
 
     def _witness(self, G_eff: Array, dr: Array) -> Array | None:
         """Forces with work exactly ``1 + |w_ex|`` when the supremum is unbounded (a certificate)."""
-        st, fs = self.st, self.fs
+        fs = self.fs
         w_ex = self.system.w_ex
         c = G_eff.T @ dr
         target = 1.0 + float(np.linalg.norm(w_ex)) - float(dr @ w_ex)
@@ -450,9 +450,9 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     (friction-aligned and least-L1 redundancy), stopping at the first member; (1) failing that,
     the relaxation with free friction directions is tested on the generators, which proves
     emptiness exactly when none does positive work; (2) otherwise the samples and then the
-    generators are tested with the full redundancy search. A member in the relative interior of ``A_r`` has a neighbourhood of
-    members in ``A_r`` (the slips and the LP data vary continuously), so DAFC then has the
-    dimension of ``A_r``; a member found only on the boundary gives the rank of the members.
+    generators are tested with the full redundancy search. A member in the relative interior of
+    ``A_r`` has, for non-degenerate data, a neighbourhood of members in ``A_r`` (the slips and the
+    LP data vary continuously), so DAFC then has the dimension of ``A_r``; a member found only on the boundary gives the rank of the members.
     These answers are marked ``exact = False`` (a local search over slips and redundancy).
     """
     ms = oracle.ms
