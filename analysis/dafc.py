@@ -453,7 +453,8 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     generators are tested with the full redundancy search. A member in the relative interior of
     ``A_r`` has, for non-degenerate data, a neighbourhood of members in ``A_r`` (the slips and the
     LP data vary continuously), so DAFC then has the dimension of ``A_r``; a member found only on
-    the boundary gives the rank of the members. These answers are marked ``exact = False`` (a local search over slips and redundancy).
+    the boundary gives the rank of the members. These answers are marked ``exact = False`` (a
+    local search over slips and redundancy).
     """
     ms = oracle.ms
     if ms.a_bar == 0:
