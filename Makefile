@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: run test test-fast lint install bench clean
+.PHONY: run test test-fast lint install bench bench-service clean
 
 $(PY):
 	$(PYTHON) -m venv $(VENV)
@@ -17,8 +17,10 @@ $(STAMP): pyproject.toml | $(PY)
 
 install: $(STAMP)
 
+# The service on http://127.0.0.1:8000 (dashboard at /, API docs at /docs); the example scenes
+# are served by GET /scenes/examples; jobs are kept in ctp-jobs.db (CTP_DATABASE_URL to change).
 run: install
-	$(VENV)/bin/ctp analyze examples/planar_disk_envelope.json
+	$(VENV)/bin/uvicorn api.main:app --host 127.0.0.1 --port 8000
 
 lint: install
 	$(PY) -m ruff check analysis planner api tests benchmarks
@@ -33,6 +35,9 @@ test-fast: install
 
 bench: install
 	$(PY) benchmarks/analysis.py
+
+bench-service: install
+	$(PY) benchmarks/service.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .mypy_cache .ruff_cache *.egg-info

@@ -1,0 +1,71 @@
+"""Plans: a job each. ``POST /plans`` -> 202 + id; poll ``GET /plans/{id}``; ``GET /plans/{id}/result``."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+from fastapi import APIRouter, Query, Response
+
+from api.deps import RunnerDep, SettingsDep, StoreDep, check_scene_size
+from api.errors import ApiError
+from api.routes import _jobs
+from api.schemas import ErrorBody, JobList, JobStatus, PlanCreate, PlanPublic
+from api.tasks import planner_available
+
+router = APIRouter(prefix="/plans", tags=["plans"])
+KIND, WHAT = "plan", "plan"
+
+
+@router.post("", status_code=202, response_model=PlanPublic,
+             responses={413: {"model": ErrorBody}, 422: {"model": ErrorBody},
+                        501: {"model": ErrorBody, "description": "the planner is not part of this build"}})
+def create_plan(body: PlanCreate, settings: SettingsDep, store: StoreDep, runner: RunnerDep,
+                response: Response) -> dict[str, Any]:
+    """Queue a plan from the scene's grasp to ``goal``; 202 with the job (``url`` to poll)."""
+    check_scene_size(body.scene, settings)
+    if body.goal.combination is not None and len(body.goal.combination) != len(body.scene.contacts):
+        raise ApiError(422, f"goal.combination: '{body.goal.combination}' has {len(body.goal.combination)} "
+                            f"letters; the scene has {len(body.scene.contacts)} contacts",
+                       errors=[{"loc": ["goal", "combination"], "msg": "one letter per contact",
+                                "type": "value_error"}])
+    if body.goal.pose is not None and len(body.goal.pose) != body.scene.D:
+        raise ApiError(422, f"goal.pose: has {len(body.goal.pose)} values; a {body.scene.dim}-D object needs "
+                            f"{body.scene.D}",
+                       errors=[{"loc": ["goal", "pose"], "msg": f"needs {body.scene.D} values", "type": "value_error"}])
+    if not planner_available():
+        raise ApiError(501, "the planner is not available in this build yet (planner.plan); "
+                            "POST /enumerations runs analysis jobs")
+    limit = _jobs.time_limit(body.time_limit, settings.job_time_limit)
+    request = {"scene": body.scene.model_dump(mode="json"), "goal": body.goal.model_dump(mode="json"),
+               "time_limit": limit}
+    job = _jobs.submit(store, runner, KIND, request)
+    response.headers["Location"] = f"/plans/{job.id}"
+    return _jobs.public(job, "/plans")
+
+
+@router.get("", response_model=JobList)
+def list_plans(store: StoreDep, status: JobStatus | None = None,
+               limit: Annotated[int, Query(ge=1, le=1000)] = 100,
+               offset: Annotated[int, Query(ge=0, le=1_000_000)] = 0) -> dict[str, Any]:
+    """Plans, newest first."""
+    items = [_jobs.public(j, "/plans") for j in store.list_jobs(KIND, status, limit, offset)]
+    return {"items": items, "count": len(items)}
+
+
+@router.get("/{plan_id}", response_model=PlanPublic, responses=_jobs.ERRORS)
+def get_plan(plan_id: str, store: StoreDep) -> dict[str, Any]:
+    """Status (queued, running, succeeded, failed, cancelled), progress 0..1, timings, and why it failed."""
+    return _jobs.public(_jobs.get(store, KIND, plan_id, WHAT), "/plans")
+
+
+@router.get("/{plan_id}/result", responses={**_jobs.ERRORS, 409: {"model": ErrorBody,
+                                                                   "description": "not finished or failed"}})
+def get_plan_result(plan_id: str, store: StoreDep) -> dict[str, Any]:
+    """The plan: ``steps`` (kind, combination, joint and object paths, torques), ``found``, ``reason``."""
+    return _jobs.result(store, KIND, plan_id, WHAT)
+
+
+@router.delete("/{plan_id}", response_model=PlanPublic, responses=_jobs.ERRORS)
+def cancel_plan(plan_id: str, store: StoreDep, runner: RunnerDep) -> dict[str, Any]:
+    """Cancel: a queued plan at once, a running one as soon as its worker is stopped."""
+    return _jobs.public(_jobs.cancel(store, runner, KIND, plan_id, WHAT), "/plans")

@@ -1,0 +1,141 @@
+"""Request and response bodies: one family per resource (``XCreate`` in, ``XPublic`` out)."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from analysis.scene import Scene
+from planner.goals import Goal
+
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
+
+
+def _check_files(scene: Any) -> Any:
+    """A scene sent over HTTP may name URDF files only inside the installed example-robot-data
+    package (``example-robot-data:...``): a request must not read arbitrary server files."""
+    if isinstance(scene, dict):
+        for i, f in enumerate(scene.get("fingers") or []):
+            if isinstance(f, dict) and isinstance(f.get("urdf"), dict):
+                file = f["urdf"].get("file")
+                if isinstance(file, str) and (not file.startswith("example-robot-data:") or ".." in file):
+                    raise ValueError(f"fingers.{i}.urdf.file: over HTTP a URDF must be "
+                                     f"'example-robot-data:<path>' (got '{file}')")
+                if f["urdf"].get("package_dirs"):
+                    raise ValueError(f"fingers.{i}.urdf.package_dirs: not accepted over HTTP")
+    return scene
+
+
+class _In(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    @field_validator("scene", mode="before", check_fields=False)
+    @classmethod
+    def _scene_files(cls, v: Any) -> Any:
+        return _check_files(v)
+
+
+class AnalysisCreate(_In):
+    """``combination`` given: the full report of that combination (``direction`` picks the motion
+    for the torque set, ``nu`` adds the friction-uncertainty check). Otherwise: every combination."""
+
+    scene: Scene
+    combination: Annotated[str, Field(min_length=1, max_length=16, pattern=r"^[FNSDfnsd]+$")] | None = None
+    direction: Annotated[list[FiniteFloat], Field(min_length=3, max_length=6)] | None = None
+    nu: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] | None = None
+
+
+class AnalysisPublic(BaseModel):
+    scene: str
+    dim: int
+    kind: Literal["combination", "enumeration"]
+    elapsed_seconds: float
+    report: dict[str, Any] | None = Field(None, description="kind=combination: the full report")
+    combinations: list[dict[str, Any]] | None = Field(None, description="kind=enumeration: one row each")
+    feasible: int | None = None
+    semantics: dict[str, str] | None = None
+    stats: dict[str, int] | None = None
+
+
+class PlanCreate(_In):
+    scene: Scene
+    goal: Goal
+    time_limit: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
+        None, description="seconds; default and maximum: the server's job_time_limit")
+
+
+class EnumerationCreate(_In):
+    """Every combination of a scene as a job (for scenes too large for ``POST /analyses``)."""
+
+    scene: Scene
+    time_limit: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+
+
+class JobPublic(BaseModel):
+    id: str
+    kind: str
+    status: JobStatus
+    progress: float = Field(description="0..1")
+    message: str
+    error: str | None = Field(None, description="why the job failed")
+    created_at: float = Field(description="Unix time")
+    started_at: float | None
+    finished_at: float | None
+    elapsed_seconds: float | None = Field(description="running time so far, or in total")
+    queued_seconds: float | None
+    attempts: int
+    result_url: str | None = Field(description="set once the job succeeded")
+    url: str
+
+
+class PlanPublic(JobPublic):
+    pass
+
+
+class EnumerationPublic(JobPublic):
+    pass
+
+
+class JobList(BaseModel):
+    items: list[JobPublic]
+    count: int
+
+
+class ExampleScene(BaseModel):
+    name: str
+    file: str
+    dim: int
+    contacts: int
+    description: str
+    scene: dict[str, Any]
+
+
+class GeometryCreate(_In):
+    scene: Scene
+    configurations: Annotated[list[list[FiniteFloat]], Field(max_length=2000)] | None = Field(
+        None, description="joint vectors q (whole hand, scene order); default: the scene's q")
+
+
+class Health(BaseModel):
+    status: Literal["ok"]
+    version: str
+    database: str
+    executor: str
+    analysis_workers: int
+    job_workers: int
+    jobs: dict[str, int]
+    planner_available: bool
+
+
+class ErrorItem(BaseModel):
+    loc: list[str | int]
+    msg: str
+    type: str
+
+
+class ErrorBody(BaseModel):
+    detail: str
+    errors: list[ErrorItem] = []
+    limit: float | None = None

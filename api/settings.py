@@ -1,0 +1,51 @@
+"""The service's settings: one pydantic-settings class, read from ``CTP_*`` environment variables
+(or a ``.env`` file). Every knob of the service lives here."""
+
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+from typing import Annotated
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+PROJECT_DIR = Path(__file__).resolve().parent.parent
+
+
+class Settings(BaseSettings):
+    model_config = SettingsConfigDict(env_prefix="CTP_", env_file=".env", extra="ignore")
+
+    #: Job store. ``sqlite:///path/jobs.db`` (default, a file next to the working directory) or a
+    #: PostgreSQL URL ``postgresql+psycopg://user:pass@host/db`` (same store code, SQLAlchemy Core).
+    database_url: str = "sqlite:///ctp-jobs.db"
+    #: Worker processes for synchronous analyses (``POST /analyses``).
+    analysis_workers: Annotated[int, Field(ge=1, le=64)] = 2
+    #: Worker processes for jobs (plans, enumerations) when no Ray address is set.
+    job_workers: Annotated[int, Field(ge=1, le=64)] = 1
+    #: Run jobs as Ray tasks on this cluster (``auto``, ``ray://host:10001``, ``local``); empty: processes.
+    ray_address: str | None = None
+    #: Wall-clock limit of one synchronous analysis (seconds); past it the worker is stopped.
+    request_time_limit: Annotated[float, Field(gt=0)] = 30.0
+    #: Default and maximum wall-clock limit of one job (seconds).
+    job_time_limit: Annotated[float, Field(gt=0)] = 600.0
+    #: Contacts a request's scene may have (the enumeration is 3**L combinations).
+    max_contacts: Annotated[int, Field(ge=1, le=16)] = 12
+    #: Largest request body accepted (bytes).
+    max_body_bytes: Annotated[int, Field(ge=1024)] = 1_000_000
+    #: A running job whose owner stops heart-beating for this long is taken over by another
+    #: runner (the same server after a restart, or another instance).
+    job_lease_seconds: Annotated[float, Field(gt=0)] = 30.0
+    #: How often the job runner looks for queued work (seconds).
+    job_poll_seconds: Annotated[float, Field(gt=0)] = 0.5
+    #: How many times a job interrupted by a crash or restart is retried before it fails.
+    job_max_attempts: Annotated[int, Field(ge=1)] = 3
+    #: Scenes listed by ``GET /scenes/examples``.
+    examples_dir: Path = PROJECT_DIR / "examples"
+    #: Start the job runner with the app (tests of the API alone may turn it off).
+    run_jobs: bool = True
+
+
+@lru_cache
+def get_settings() -> Settings:
+    return Settings()

@@ -1,0 +1,119 @@
+"""The work itself, run inside worker processes (or Ray tasks): pure functions of JSON-ready
+payloads, returning JSON-ready results. They re-validate the scene (cheap) so a worker never
+trusts a pickled object, and raise the project's exceptions, which the caller maps."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+Progress = Callable[[float, str], None]
+
+#: Job kinds and the task each runs.
+KINDS = ("analysis", "enumeration", "plan")
+
+
+class PlannerUnavailable(RuntimeError):
+    """``planner.plan`` is not part of this build yet."""
+
+
+_PLAN = "plan"
+
+
+def planner_entry() -> Callable[..., Any] | None:
+    """``planner.plan`` once the planner exports it, else None."""
+    import importlib
+
+    try:
+        mod = importlib.import_module("planner")
+    except ImportError:
+        return None
+    fn = getattr(mod, _PLAN, None)
+    return fn if callable(fn) else None
+
+
+def planner_available() -> bool:
+    return planner_entry() is not None
+
+
+def _system(payload: dict[str, Any]) -> tuple[Any, Any]:
+    from analysis.contacts import build_system
+    from analysis.scene import scene_from_dict
+
+    scene = scene_from_dict(payload["scene"])
+    return scene, build_system(scene)
+
+
+def run_analysis(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
+    """``POST /analyses``: the full report of one combination, or the table of all of them."""
+    if payload.get("combination"):
+        from analysis.combination import analyze_combination
+
+        t0 = time.perf_counter()
+        scene, system = _system(payload)
+        direction = payload.get("direction")
+        rep = analyze_combination(system, payload["combination"],
+                                  direction=None if direction is None else np.asarray(direction, dtype=float),
+                                  nu=payload.get("nu"))
+        return {"scene": scene.name, "dim": scene.dim, "kind": "combination", "report": rep.to_json(),
+                "elapsed_seconds": time.perf_counter() - t0}
+    return run_enumeration(payload, progress)
+
+
+def run_enumeration(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
+    """Every combination's summary (feasible, DAFC dimension, an example direction)."""
+    from analysis.dafc import SEMANTICS
+    from analysis.enumerate import enumerate_combinations
+
+    t0 = time.perf_counter()
+    scene, system = _system(payload)
+
+    def on_step(k: int, n: int) -> None:
+        if progress is not None and n:
+            progress(k / n, f"{k} of {n} combinations")
+
+    summaries, stats = enumerate_combinations(system, progress=on_step, workers=1)
+    rows = [s.to_json() for s in summaries]
+    return {"scene": scene.name, "dim": scene.dim, "kind": "enumeration", "semantics": SEMANTICS,
+            "combinations": rows, "feasible": sum(1 for r in rows if r["feasible"]),
+            "stats": {"combinations": stats.combinations, "pruned_motion": stats.pruned_motion,
+                      "pruned_stationary": stats.pruned_stationary, "stationary_lps": stats.stationary_lps},
+            "elapsed_seconds": time.perf_counter() - t0}
+
+
+def run_plan(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
+    """A plan from the scene's grasp to the goal (``planner.plan``)."""
+    plan = planner_entry()
+    if plan is None:
+        raise PlannerUnavailable("the planner is not available in this build (planner.plan missing)")
+    from analysis.scene import scene_from_dict
+    from planner.goals import Goal
+
+    t0 = time.perf_counter()
+    scene = scene_from_dict(payload["scene"])
+    goal = Goal.model_validate(payload["goal"])
+    result = plan(scene, goal, progress=progress, time_limit=payload.get("time_limit"))
+    out: dict[str, Any] = result.to_json()
+    out.setdefault("elapsed_seconds", time.perf_counter() - t0)
+    return out
+
+
+TASKS: dict[str, Callable[[dict[str, Any], Progress | None], dict[str, Any]]] = {
+    "analysis": run_analysis,
+    "enumeration": run_enumeration,
+    "plan": run_plan,
+}
+
+
+def run_task(kind: str, payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
+    return TASKS[kind](payload, progress)
+
+
+def warm_up() -> None:
+    """Import the heavy modules once per worker so the first request does not pay for them."""
+    import analysis.combination
+    import analysis.enumerate
+    import analysis.scene  # noqa: F401

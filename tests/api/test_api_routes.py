@@ -1,0 +1,352 @@
+"""Every route of the service through TestClient: status codes and payloads, on real workers."""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from service_helpers import example, settings_for, wait_for
+
+from analysis.combination import analyze_combination
+from analysis.contacts import build_system
+from analysis.enumerate import enumerate_combinations
+from analysis.scene import scene_from_dict
+from api.main import create_app
+from api.tasks import planner_available
+
+PLANAR = example("planar_disk_envelope")
+
+
+# -- health, examples, dashboard ---------------------------------------------------------------
+
+
+def test_health(client: TestClient) -> None:
+    r = client.get("/health")
+    assert r.status_code == 200
+    body = r.json()
+    assert body["status"] == "ok" and body["database"] == "sqlite"
+    assert body["analysis_workers"] == 1 and body["executor"] == "processes (1)"
+    assert body["planner_available"] == planner_available()
+
+
+def test_examples_are_valid_scenes(client: TestClient) -> None:
+    r = client.get("/scenes/examples")
+    assert r.status_code == 200
+    items = r.json()
+    names = {i["file"] for i in items}
+    assert {"planar_disk_envelope.json", "sphere_four_finger_palm.json"} <= names
+    for item in items:
+        sc = scene_from_dict(item["scene"])
+        assert item["dim"] == sc.dim and item["contacts"] == len(sc.contacts)
+
+
+def test_dashboard_and_openapi(client: TestClient) -> None:
+    r = client.get("/")
+    assert r.status_code == 200 and "text/html" in r.headers["content-type"]
+    assert "/static/app.js" in r.text
+    assert client.get("/static/app.js").status_code == 200
+    spec = client.get("/openapi.json").json()
+    for path in ("/analyses", "/plans", "/plans/{plan_id}", "/plans/{plan_id}/result", "/scenes/examples",
+                 "/health", "/enumerations"):
+        assert path in spec["paths"], path
+    assert client.get("/docs").status_code == 200
+
+
+# -- POST /analyses ----------------------------------------------------------------------------
+
+
+def test_analysis_table_matches_the_enumeration(client: TestClient) -> None:
+    r = client.post("/analyses", json={"scene": PLANAR})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["kind"] == "enumeration" and body["scene"] == "planar-disk-envelope"
+    expected, _ = enumerate_combinations(build_system(scene_from_dict(PLANAR)), workers=1)
+    assert [row["combination"] for row in body["combinations"]] == [s.combination for s in expected]
+    assert [row["feasible"] for row in body["combinations"]] == [s.feasible for s in expected]
+    assert body["feasible"] == sum(s.feasible for s in expected) > 0
+    assert body["semantics"]
+
+
+def test_analysis_of_one_combination(client: TestClient) -> None:
+    system = build_system(scene_from_dict(PLANAR))
+    feasible = next(s for s in enumerate_combinations(system, workers=1)[0] if s.feasible)
+    r = client.post("/analyses", json={"scene": PLANAR, "combination": feasible.combination})
+    assert r.status_code == 200, r.text
+    rep = r.json()["report"]
+    ref = analyze_combination(system, feasible.combination).to_json()
+    assert rep["combination"] == feasible.combination and rep["feasible"] is True
+    assert rep["dafc"]["dim"] == ref["dafc"]["dim"]
+    np.testing.assert_allclose(rep["stationary"]["tau"], ref["stationary"]["tau"], atol=1e-9)
+    # with a direction: the torque set for that direction
+    d = rep["example_direction"]
+    r2 = client.post("/analyses", json={"scene": PLANAR, "combination": feasible.combination, "direction": d,
+                                        "nu": 0.8})
+    assert r2.status_code == 200, r2.text
+    rep2 = r2.json()["report"]
+    assert rep2["direction_test"]["member"] is True
+    assert "friction_uncertainty" in rep2
+
+
+@pytest.mark.parametrize(
+    ("mutate", "field"),
+    [
+        (lambda s: s["contacts"][2].__setitem__("normal", [1.0, 1.0]), "scene.contacts.2.normal"),
+        (lambda s: s["contacts"][1].__setitem__("body", "thumb/0"), "scene.contacts.1.body"),
+        (lambda s: s["contacts"][0].__setitem__("mu", -0.5), "scene.contacts.0.mu"),
+        (lambda s: s["contacts"][0].__setitem__("point", [0.1, 0.2, 0.3]), "scene.contacts.0.point"),
+        (lambda s: s["fingers"][0]["links"][0].__setitem__("length", -1), "scene.fingers.0.links.0.length"),
+        (lambda s: s.__setitem__("dim", 4), "scene.dim"),
+        (lambda s: s.pop("contacts"), "scene.contacts"),
+        (lambda s: s["object"]["shape"].__setitem__("radius", "big"), "scene.object.shape.radius"),
+    ],
+)
+def test_bad_scene_is_422_naming_the_field(client: TestClient, mutate: object, field: str) -> None:
+    scene = copy.deepcopy(PLANAR)
+    mutate(scene)  # type: ignore[operator]
+    r = client.post("/analyses", json={"scene": scene})
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert body["detail"].startswith(field + ":"), body["detail"]
+    assert [str(p) for p in body["errors"][0]["loc"]] == field.split(".")
+
+
+def test_nan_and_malformed_json_are_422(client: TestClient) -> None:
+    scene = copy.deepcopy(PLANAR)
+    scene["external_wrench"] = [0.0, math.nan, 0.0]
+    r = client.post("/analyses", content=json.dumps({"scene": scene}), headers={"content-type": "application/json"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("scene.external_wrench.1:")
+    r = client.post("/analyses", content=b'{"scene": {', headers={"content-type": "application/json"})
+    assert r.status_code == 422 and "JSON" in r.json()["detail"]
+    r = client.post("/analyses", content=b"\xff\xfe{", headers={"content-type": "application/json"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("body:")
+    r = client.post("/analyses", json={"scene": PLANAR, "extra": 1})
+    assert r.status_code == 422 and r.json()["detail"].startswith("extra:")
+
+
+@pytest.mark.parametrize(
+    ("extra", "field"),
+    [
+        ({"combination": "FFDD"}, "combination"),
+        ({"combination": "FFDDX"}, "combination"),
+        ({"combination": "FFDDN"}, "combination.4"),  # N on a frictional contact
+        ({"combination": "FFDDF", "direction": [1.0, 0.0]}, "direction"),
+        ({"direction": [1.0, 0.0, 0.0]}, "direction"),
+        ({"nu": 0.5}, "nu"),
+        ({"combination": "FFDDF", "nu": 2.0}, "nu"),
+    ],
+)
+def test_bad_request_fields_are_422(client: TestClient, extra: dict[str, object], field: str) -> None:
+    r = client.post("/analyses", json={"scene": PLANAR, **extra})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"].startswith(field + ":"), r.json()["detail"]
+
+
+def test_urdf_outside_the_package_is_refused(client: TestClient) -> None:
+    scene = example("allegro_right_box")
+    scene["fingers"][0]["urdf"]["file"] = "/etc/passwd"
+    r = client.post("/analyses", json={"scene": scene})
+    assert r.status_code == 422 and "fingers.0.urdf.file" in r.json()["detail"]
+
+
+def test_allegro_urdf_scene_is_analysed(client: TestClient) -> None:
+    r = client.post("/analyses", json={"scene": example("allegro_right_box")})
+    assert r.status_code == 200, r.text
+    assert len(r.json()["combinations"]) == 3 ** 6
+
+
+def test_too_many_contacts_is_413_with_the_limit(client: TestClient) -> None:
+    r = client.post("/analyses", json={"scene": example("sphere_four_finger_wrap")})  # 9 contacts > 6
+    assert r.status_code == 413
+    assert r.json()["limit"] == 6 and "max_contacts" in r.json()["detail"]
+    r = client.post("/enumerations", json={"scene": example("sphere_four_finger_wrap")})
+    assert r.status_code == 413
+
+
+def test_body_too_large_is_413(client: TestClient) -> None:
+    big = {"scene": {**PLANAR, "description": "x" * 300_000}}
+    r = client.post("/analyses", json=big)
+    assert r.status_code == 413 and r.json()["limit"] == 200_000
+    data = json.dumps(big).encode()
+
+    def chunks() -> Iterator[bytes]:  # no Content-Length: counted while it streams in
+        for k in range(0, len(data), 65536):
+            yield data[k:k + 65536]
+
+    r = client.post("/analyses", content=chunks(), headers={"content-type": "application/json"})
+    assert r.status_code == 413 and r.json()["limit"] == 200_000
+
+
+# -- scenes ------------------------------------------------------------------------------------
+
+
+def test_geometry_is_forward_kinematics(client: TestClient) -> None:
+    q = [0.3, 0.2, 1.5, -0.4]
+    r = client.post("/scenes/geometry", json={"scene": PLANAR, "configurations": [PLANAR["fingers"][0]["q"] +
+                                                                                  PLANAR["fingers"][1]["q"], q]})
+    assert r.status_code == 200, r.text
+    frames = r.json()["frames"]
+    left = frames[1]["fingers"][0]["links"]
+    base = np.array(PLANAR["fingers"][0]["base"]["position"])
+    e1 = base + 0.9 * np.array([math.cos(0.3), math.sin(0.3)])
+    e2 = e1 + 0.9 * np.array([math.cos(0.5), math.sin(0.5)])
+    np.testing.assert_allclose(left[0]["a"], base, atol=1e-8)
+    np.testing.assert_allclose(left[0]["b"], e1, atol=1e-8)
+    np.testing.assert_allclose(left[1]["b"], e2, atol=1e-8)
+    # in the scene's own configuration the contact points lie on their links
+    c0 = np.array(PLANAR["contacts"][0]["point"])
+    a, b = (np.array(frames[0]["fingers"][0]["links"][0][k]) for k in "ab")
+    t = np.dot(c0 - a, b - a) / np.dot(b - a, b - a)
+    assert np.linalg.norm(a + t * (b - a) - c0) < 1e-6
+    r = client.post("/scenes/geometry", json={"scene": PLANAR, "configurations": [[0.0, 1.0]]})
+    assert r.status_code == 422 and r.json()["detail"].startswith("configurations.0:")
+
+
+def test_geometry_of_a_3d_scene(client: TestClient) -> None:
+    r = client.post("/scenes/geometry", json={"scene": example("sphere_four_finger_palm")})
+    assert r.status_code == 200
+    links = r.json()["frames"][0]["fingers"][0]["links"]
+    assert all(len(link["a"]) == 3 for link in links)
+
+
+def test_upload_json_and_yaml(client: TestClient, tmp_path: Path) -> None:
+    import yaml
+
+    r = client.post("/scenes/upload", files={"file": ("s.json", json.dumps(PLANAR), "application/json")})
+    assert r.status_code == 200 and r.json()["name"] == PLANAR["name"]
+    r = client.post("/scenes/upload", files={"file": ("s.yaml", yaml.safe_dump(PLANAR), "text/yaml")})
+    assert r.status_code == 200 and len(r.json()["contacts"]) == 5
+    bad = copy.deepcopy(PLANAR)
+    bad["contacts"][3]["normal"] = [0.0, 2.0]
+    r = client.post("/scenes/upload", files={"file": ("s.json", json.dumps(bad), "application/json")})
+    assert r.status_code == 422 and r.json()["detail"].startswith("scene.contacts.3.normal:")
+    r = client.post("/scenes/upload", files={"file": ("s.json", "{not json", "application/json")})
+    assert r.status_code == 422 and "cannot parse JSON" in r.json()["detail"]
+
+
+# -- jobs: enumerations (the same machinery as plans) ------------------------------------------
+
+
+def test_enumeration_job_life_cycle(client: TestClient) -> None:
+    r = client.post("/enumerations", json={"scene": PLANAR})
+    assert r.status_code == 202, r.text
+    job = r.json()
+    assert job["status"] in ("queued", "running") and r.headers["location"] == f"/enumerations/{job['id']}"
+    done = wait_for(client, job["url"])
+    assert done["status"] == "succeeded", done
+    assert done["progress"] == 1.0 and done["elapsed_seconds"] > 0 and done["attempts"] == 1
+    assert done["finished_at"] >= done["started_at"] >= done["created_at"]
+    res = client.get(done["result_url"])
+    assert res.status_code == 200
+    direct = client.post("/analyses", json={"scene": PLANAR}).json()
+    assert res.json()["combinations"] == direct["combinations"]
+    listed = client.get("/enumerations").json()
+    assert job["id"] in [j["id"] for j in listed["items"]]
+    only_ok = client.get("/enumerations", params={"status": "succeeded"}).json()["items"]
+    assert all(j["status"] == "succeeded" for j in only_ok)
+    # a finished job cannot be cancelled any more: DELETE returns it unchanged
+    assert client.delete(job["url"]).json()["status"] == "succeeded"
+
+
+def test_unknown_jobs_are_404(client: TestClient) -> None:
+    assert client.get("/plans/nope").status_code == 404
+    assert client.get("/plans/nope/result").status_code == 404
+    assert client.delete("/plans/nope").status_code == 404
+    job = client.post("/enumerations", json={"scene": PLANAR}).json()
+    assert client.get(f"/plans/{job['id']}").status_code == 404  # an enumeration is not a plan
+    wait_for(client, job["url"])
+    r = client.get("/plans", params={"status": "bogus"})
+    assert r.status_code == 422 and r.json()["detail"].startswith("query.status:")
+    assert client.get("/plans", params={"limit": 0}).status_code == 422
+
+
+# -- plans -------------------------------------------------------------------------------------
+
+
+def test_plan_goal_validation(client: TestClient) -> None:
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "sideways"}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("goal.type:")
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "combination"}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("goal:")
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "combination", "combination": "FF"}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("goal.combination:")
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "pose", "pose": [0, 0, 0, 0, 0, 0]}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("goal.pose:")
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}, "time_limit": 1e9})
+    assert r.status_code in (422, 501)
+
+
+def test_plan_life_cycle(client: TestClient) -> None:
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}})
+    if not planner_available():
+        assert r.status_code == 501 and "planner" in r.json()["detail"]
+        assert client.get("/plans").json()["count"] == 0
+        return
+    assert r.status_code == 202, r.text
+    done = wait_for(client, r.json()["url"], timeout=120)
+    assert done["status"] in ("succeeded", "failed"), done
+    if done["status"] == "succeeded":
+        plan = client.get(done["result_url"]).json()
+        assert "steps" in plan and "found" in plan
+        for step in plan["steps"]:
+            assert {"kind", "combination"} <= set(step)
+    else:
+        assert done["error"]
+        assert client.get(f"/plans/{done['id']}/result").status_code == 409
+
+
+# -- limits, cancellation, recovery (an app with tight limits) ---------------------------------
+
+
+@pytest.fixture(scope="module")
+def tight(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
+    app = create_app(settings_for(tmp_path_factory.mktemp("tight"), max_contacts=9, request_time_limit=1.5,
+                                  job_time_limit=60.0))
+    with TestClient(app) as c:
+        yield c
+
+
+def test_sync_time_limit_stops_the_worker(tight: TestClient) -> None:
+    wrap = example("sphere_four_finger_wrap")  # 19,683 combinations: far more than 1.5 s
+    r = tight.post("/analyses", json={"scene": wrap})
+    assert r.status_code == 422, r.text
+    body = r.json()
+    assert body["limit"] == 1.5 and "time limit" in body["detail"] and "/enumerations" in body["detail"]
+    # the stopped worker was replaced: the next request is answered
+    r = tight.post("/analyses", json={"scene": PLANAR, "combination": "FFFFF"})
+    assert r.status_code == 200, r.text
+    assert tight.get("/health").json()["analysis_workers"] == 1
+
+
+def test_job_time_limit_fails_the_job_with_the_reason(tight: TestClient) -> None:
+    r = tight.post("/enumerations", json={"scene": example("sphere_four_finger_wrap"), "time_limit": 1.0})
+    assert r.status_code == 202
+    done = wait_for(tight, r.json()["url"])
+    assert done["status"] == "failed" and "time limit" in done["error"]
+    r = tight.get(f"{done['url']}/result")
+    assert r.status_code == 409 and "failed" in r.json()["detail"]
+    r = tight.post("/enumerations", json={"scene": PLANAR, "time_limit": 1e6})
+    assert r.status_code == 422 and r.json()["detail"].startswith("time_limit:") and r.json()["limit"] == 60.0
+
+
+def test_cancel_running_and_queued_jobs(tight: TestClient) -> None:
+    wrap = example("sphere_four_finger_wrap")
+    running = tight.post("/enumerations", json={"scene": wrap}).json()
+    queued = tight.post("/enumerations", json={"scene": PLANAR}).json()  # one job worker: waits
+    wait_for(tight, running["url"], statuses=("running",))
+    r = tight.get(f"{queued['url']}/result")
+    assert r.status_code == 409
+    assert tight.delete(queued["url"]).json()["status"] == "cancelled"
+    r = tight.delete(running["url"])
+    assert r.status_code == 200 and r.json()["status"] in ("running", "cancelled")
+    done = wait_for(tight, running["url"], timeout=20)
+    assert done["status"] == "cancelled"
+    # the worker that ran it was replaced; the next job runs
+    nxt = tight.post("/enumerations", json={"scene": PLANAR}).json()
+    assert wait_for(tight, nxt["url"])["status"] == "succeeded"
+    assert wait_for(tight, queued["url"])["status"] == "cancelled"

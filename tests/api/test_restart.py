@@ -1,0 +1,92 @@
+"""Jobs survive a server crash: submit jobs, SIGKILL the server and its workers mid-job, start it
+again on the same store, and every accepted job completes."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+from service_helpers import example, free_port, kill_tree, start_server, stop_server
+
+from api.tasks import planner_available
+
+
+@pytest.mark.slow
+def test_jobs_survive_a_killed_server(tmp_path: Path) -> None:
+    env = {"CTP_JOB_LEASE_SECONDS": "2"}
+    port = free_port()
+    server = start_server(tmp_path, port, **env)
+    base = f"http://127.0.0.1:{port}"
+    planar, palm = example("planar_disk_envelope"), example("sphere_four_finger_palm")
+    ids: list[str] = []
+    try:
+        for scene in (palm, planar, palm, planar):
+            r = httpx.post(f"{base}/enumerations", json={"scene": scene}, timeout=30)
+            assert r.status_code == 202, r.text
+            ids.append(r.json()["url"])
+        if planner_available():
+            r = httpx.post(f"{base}/plans", json={"scene": planar, "goal": {"type": "active"}}, timeout=30)
+            assert r.status_code == 202, r.text
+            ids.append(r.json()["url"])
+        # wait until the first job is running, then crash everything
+        deadline = time.monotonic() + 60
+        while httpx.get(base + ids[0], timeout=10).json()["status"] != "running":
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+    finally:
+        kill_tree(server)
+    with pytest.raises(httpx.HTTPError):
+        httpx.get(f"{base}/health", timeout=2)
+
+    server = start_server(tmp_path, port, **env)
+    try:
+        deadline = time.monotonic() + 240
+        final: dict[str, dict] = {}
+        while len(final) < len(ids):
+            assert time.monotonic() < deadline, f"not all jobs finished: {final}"
+            for url in ids:
+                body = httpx.get(base + url, timeout=10).json()
+                if body["status"] in ("succeeded", "failed", "cancelled"):
+                    final[url] = body
+            time.sleep(0.2)
+        assert all(b["status"] == "succeeded" for b in final.values()), final
+        first = final[ids[0]]
+        assert first["attempts"] == 2, first  # interrupted once, resumed once
+        for url in ids:
+            assert httpx.get(base + url + "/result", timeout=10).status_code == 200
+        counts = httpx.get(f"{base}/health", timeout=10).json()["jobs"]
+        assert counts.get("succeeded", 0) >= len(ids)
+    finally:
+        stop_server(server)
+
+
+@pytest.mark.slow
+def test_a_graceful_stop_requeues_at_once(tmp_path: Path) -> None:
+    """SIGINT (a deploy, Ctrl-C): the running job goes back to the queue without waiting for its
+    lease (30 s here) and without counting as an attempt; the restarted server finishes it."""
+    port = free_port()
+    server = start_server(tmp_path, port, CTP_JOB_LEASE_SECONDS="30")
+    base = f"http://127.0.0.1:{port}"
+    palm = example("sphere_four_finger_palm")
+    urls = [httpx.post(f"{base}/enumerations", json={"scene": palm}, timeout=30).json()["url"] for _ in range(2)]
+    deadline = time.monotonic() + 60
+    while httpx.get(base + urls[0], timeout=10).json()["status"] != "running":
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    stop_server(server)
+    assert server.returncode is not None
+    stopped_at = time.time()
+    t0 = time.monotonic()
+    server = start_server(tmp_path, port, CTP_JOB_LEASE_SECONDS="30")
+    try:
+        for url in urls:
+            while (body := httpx.get(base + url, timeout=10).json())["status"] in ("queued", "running"):
+                assert time.monotonic() - t0 < 25, body  # well inside the 30 s lease
+                time.sleep(0.1)
+            assert body["status"] == "succeeded" and body["attempts"] == 1, body
+        first = httpx.get(base + urls[0], timeout=10).json()
+        assert first["started_at"] < stopped_at < first["finished_at"], first  # interrupted, then resumed
+    finally:
+        stop_server(server)
