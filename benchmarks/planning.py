@@ -54,6 +54,7 @@ def run(name: str, target: float, repeat: int, time_limit: float | None) -> None
     if not last.found:
         print(f"  reason: {last.reason}")
     print(f"  time to plan: median {statistics.median(totals):.2f} s over {repeat} run(s) "
+          f"(min {min(totals):.2f}, max {max(totals):.2f}) "
           f"(target < {target:.0f} s: {'met' if statistics.median(totals) < target else 'NOT met'})")
     print(f"  nodes expanded {s.nodes_expanded}, generated {s.nodes_generated}, lazy edges checked "
           f"{s.lazy_edges_checked}")

@@ -18,13 +18,17 @@ class Goal(BaseModel):
       its negative) without changing the joint torques;
     * ``combination``: a named contact-state combination (one letter per contact of the scene
       the search reached), ``combination`` field;
+    * ``fingertips``: every finger touches the object, each only with the tip of its last link
+      (contacts on fixed bodies such as the palm may remain), and the contacts hold the object
+      (a stationary grasp, 18): a regrasp from an enveloping grasp to a fingertip grasp (the
+      paper's Fig. 5, steps 1 to 3, the palm still holding);
     * ``pose``: the object pose ``pose`` (2-D ``[x, y, theta]``, 3-D ``[x, y, z, rx, ry, rz]`` with
       a rotation vector) within ``tolerance`` (Euclidean, scene units and radians).
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    type: Literal["active", "passive", "combination", "pose"]
+    type: Literal["active", "passive", "combination", "pose", "fingertips"]
     combination: Annotated[str, Field(min_length=1, pattern=r"^[FNSDfnsd]+$")] | None = None
     pose: list[FiniteFloat] | None = None
     tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 0.05

@@ -21,6 +21,7 @@ Costs: joint-path length + object-path length / object size + ``effort_weight`` 
 
 from __future__ import annotations
 
+import itertools
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
 from typing import Any
@@ -40,6 +41,7 @@ from planner.ompl_paths import (
     CollisionModel,
     fingertip_ik,
     integrate_object_motion,
+    joint_limits,
     keep_contacts,
     path_clearance_certified,
     plan_transfer,
@@ -83,8 +85,10 @@ class PlannerOptions:
     separate_finger_contacts: bool = False
     #: A* heuristic for the ``active`` goal: ``heuristic_weight`` per fingertip contact still
     #: missing (2 in 2-D, 3 in 3-D: the fewest point contacts with friction that can give active
-    #: closure) plus one if a fixed body still touches. It never overestimates when every contact
-    #: and object-motion edge costs at least ``heuristic_weight``; 0 gives plain Dijkstra.
+    #: closure) plus one if a fixed body still touches; for the ``fingertips`` goal,
+    #: ``heuristic_weight`` per finger not yet touching with its tip only. It never overestimates
+    #: when every contact and object-motion edge costs at least ``heuristic_weight``; 0 gives plain
+    #: Dijkstra.
     heuristic_weight: float = 1.0
     #: latitudes (degrees) of the candidate rings on a sphere
     sphere_latitudes: tuple[float, ...] = (-10.0, 0.0, 15.0)
@@ -164,6 +168,8 @@ class ContactStateGraph:
         if ref is None or ref.finger is None:
             return False
         chain = self.hand.fingers[ref.finger]
+        if ref.link >= chain.n_joints:
+            return True  # a link beyond the last joint (a URDF tip link) is the tip
         if ref.link != chain.n_joints - 1:
             return False
         a, b = chain.body_segment(ref.link, self.hand.q0[self.hand.finger_slice(ref.finger)])
@@ -175,9 +181,14 @@ class ContactStateGraph:
     def heuristic(self, key: Any) -> float:
         """See :attr:`PlannerOptions.heuristic_weight`."""
         w = self.options.heuristic_weight
-        if self.goal.type != "active" or w == 0.0:
+        if self.goal.type not in ("active", "fingertips") or w == 0.0:
             return 0.0
         st = self.states[key]
+        if self.goal.type == "fingertips":  # fingers still to (re)grasp with their tip
+            done = {f for f in range(len(self.hand.fingers))
+                    if (cs := [c for c in st.contacts if self._finger_of(c.body) == f])
+                    and all(self.is_fingertip(c) for c in cs)}
+            return w * (len(self.hand.fingers) - len(done))
         need = 2 if st.dim == 2 else 3
         tips = sum(self.is_fingertip(c) for c in st.contacts)
         fixed = any(self._finger_of(c.body) is None for c in st.contacts)
@@ -262,6 +273,11 @@ class ContactStateGraph:
             u /= np.linalg.norm(u)
             q = state.q.copy()
             path = [q.copy()]
+            # overlaps at the start (a link modelled slightly into the palm or a neighbour) may
+            # persist but not deepen; "clear" is measured on the other terms
+            allow = self.model.start_allowance(finger, q, state.position, state.rotation)
+            free_terms = allow == 0.0
+            j_lo, j_hi = joint_limits(self.hand, finger)
             h = 0.02
             free, first_free = False, 0  # clear of the object by half the minimum radius
             target = 4.0 * self.model.min_radius  # retreat this far when possible
@@ -269,7 +285,12 @@ class ContactStateGraph:
                 q_next, res = project_contacts(self.hand, state, q + h * u, keep)
                 if res > 1e-6:
                     return None
-                clear = self.model.finger_clearance(finger, q_next, state.position, state.rotation)
+                if np.any(q_next[sl] < j_lo - 1e-9) or np.any(q_next[sl] > j_hi + 1e-9):
+                    break  # joint limit: stop here
+                terms = self.model.clearance_terms(finger, q_next, state.position, state.rotation)
+                if np.any(terms < allow - 1e-12) and free:
+                    break
+                clear = float(terms[free_terms].min()) if free_terms.any() else np.inf
                 if free and clear < 0.5 * self.model.min_radius:
                     break  # going further would approach something again: stop where it was clear
                 q = q_next
@@ -285,10 +306,10 @@ class ContactStateGraph:
             # leaving the contact, the links may touch (not penetrate); once free, full clearance
             ok, _, _ = path_clearance_certified(self.model, finger, state.q, arr[: first_free + 1, sl],
                                                 state.position, state.rotation, touching_last=touching,
-                                                touch_from=0)
+                                                touch_from=0, allowance=allow)
             if ok and first_free < len(arr) - 1:
                 ok, _, _ = path_clearance_certified(self.model, finger, state.q, arr[first_free:, sl],
-                                                    state.position, state.rotation)
+                                                    state.position, state.rotation, allowance=allow)
             return arr if ok else None
         finally:
             self.timing["motion"] += time.perf_counter() - t0
@@ -314,14 +335,20 @@ class ContactStateGraph:
         elif isinstance(shape, Box):
             c = np.asarray(shape.position if shape.position is not None else np.zeros(d), float)
             h = np.asarray(shape.size, float) / 2
+            # every face: its centre and points halfway to its edges (a 3 x 3 grid in 3-D)
             for ax in range(d):
+                others = [a for a in range(d) if a != ax]
                 for sgn in (-1.0, 1.0):
                     u = np.zeros(d)
                     u[ax] = sgn
-                    pts.append((c + h * u, -u))
+                    for offs in itertools.product((0.0, -0.5, 0.5), repeat=len(others)):
+                        p = c + h * u
+                        for a, o in zip(others, offs, strict=True):
+                            p[a] += o * h[a]
+                        pts.append((p, -u))
         min_sp = self.options.min_contact_spacing * self.size
         out = [(p, nn) for p, nn in pts if all(np.linalg.norm(p - c.point_object) > min_sp for c in state.contacts)]
-        if finger is None:
+        if finger is None or isinstance(shape, Box):  # box faces: every face may be reached over
             return out
         R = state.rotation[:d, :d]
         chain = self.hand.fingers[finger]
@@ -333,6 +360,19 @@ class ContactStateGraph:
         if nb < 1e-9:
             return out
         return [(p, nn) for p, nn in out if float(-nn @ to_base) / nb > self.options.facing]
+
+    def _finger_base(self, finger: int) -> Array:
+        """World position ``(d,)`` of the finger's first joint (fixed on the palm)."""
+        sl = self.hand.finger_slice(finger)
+        return np.asarray(self.hand.fingers[finger].body_pose(0, self.hand.q0[sl])[1][: self.hand.dim])
+
+    def _finger_reach(self, finger: int) -> float:
+        """Largest distance from the first joint to any point of the link axes: the sum of the
+        link lengths (distances between consecutive joint origins do not depend on ``q``)."""
+        sl = self.hand.finger_slice(finger)
+        chain = self.hand.fingers[finger]
+        q0 = self.hand.q0[sl]
+        return float(sum(np.linalg.norm(np.subtract(*chain.body_segment(k, q0))) for k in range(chain.n_joints)))
 
     def contact_edges(self, state: GraspState) -> list[Successor]:
         """Eq. (33), D -> F: a free finger makes a new contact with its tip.
@@ -353,15 +393,22 @@ class ContactStateGraph:
         R = state.rotation[: state.dim, : state.dim]
         for f in free:
             chain = self.hand.fingers[f]
-            tip_ref = BodyRef(f"{chain.name}/{chain.n_joints - 1}", f, chain.n_joints - 1)
+            tip_ref = BodyRef(tip_body_name(self.hand, f), f, chain.n_joints - 1)
             r_tip = self.hand.body_radius(tip_ref)
             sl = self.hand.finger_slice(f)
+            allow = self.model.start_allowance(f, state.q, state.position, state.rotation)
             for p_obj, n_obj in self.surface_candidates(state, f):
                 s = state.position + R @ p_obj
                 n = R @ n_obj
                 t0 = time.perf_counter()
-                seeds = [state.q[sl], self.hand.q0[sl], np.zeros(sl.stop - sl.start)]
+                seeds: list[Array] = []
+                for cand in (state.q[sl], self.hand.q0[sl], np.zeros(sl.stop - sl.start)):
+                    if all(np.linalg.norm(cand - o) > 1e-9 for o in seeds):
+                        seeds.append(cand)
                 sols: list[Array] = []
+                if float(np.linalg.norm(s - r_tip * n - self._finger_base(f))) > self._finger_reach(f):
+                    seeds = []  # out of reach: no IK needed
+                    self._reject("new contact point out of the finger's reach")
                 for seed_q in seeds:
                     ck = (f, tuple(np.round(s, 6)), tuple(np.round(n, 6)), tuple(np.round(seed_q, 6)))
                     if ck not in self._ik_cache:
@@ -374,7 +421,8 @@ class ContactStateGraph:
                 for x in sols:  # the contact configuration itself must be collision-free
                     q_try = state.q.copy()
                     q_try[sl] = x
-                    if self.model.finger_clearance(f, q_try, state.position, state.rotation, [tip_ref]) >= 0.0:
+                    if self.model.finger_clearance(f, q_try, state.position, state.rotation, [tip_ref],
+                                                   allow) >= 0.0:
                         valid.append(x)
                 self.timing["ik"] += time.perf_counter() - t0
                 if not valid:
@@ -532,6 +580,13 @@ class ContactStateGraph:
         return out
 
 
+def tip_body_name(hand: HandKinematics, finger: int) -> str:
+    """The body name of a finger's last link (``"name/k"`` for scene chains, the URDF link name
+    for URDF fingers)."""
+    chain = hand.fingers[finger]
+    return chain.body_names()[chain.n_joints - 1]
+
+
 def _pose_state(state: GraspState, pose: Array) -> GraspState:
     from analysis.rotations import rotvec_to_matrix, rotz
 
@@ -572,6 +627,7 @@ def _separating_motion(rays: Array, lines: Array, J_d: Array, feasible: Array) -
 def goal_reached(graph: ContactStateGraph, state: GraspState, goal: Goal) -> bool:
     """Is the goal satisfied in ``state``? (active: a~ = D and every sampled direction in DAFC of
     the all-F combination; passive: DPFC (28) of the all-F combination contains every wrench;
+    fingertips: every finger touches with its tip only and (18) holds;
     combination: that combination is feasible; pose: within tolerance)."""
     if goal.type == "pose":
         assert goal.pose is not None
@@ -579,6 +635,13 @@ def goal_reached(graph: ContactStateGraph, state: GraspState, goal: Goal) -> boo
         if state.dim == 2:
             diff[2] = (diff[2] + np.pi) % (2 * np.pi) - np.pi
         return float(np.linalg.norm(diff)) <= goal.tolerance
+    if goal.type == "fingertips":
+        fingers = {graph._finger_of(c.body) for c in state.contacts} - {None}
+        if len(fingers) < len(graph.hand.fingers):
+            return False
+        if not all(graph.is_fingertip(c) for c in state.contacts if graph._finger_of(c.body) is not None):
+            return False
+        return graph.analysis(state).stationary(all_f(state)) is not None
     sa = graph.analysis(state)
     if goal.type == "combination":
         assert goal.combination is not None

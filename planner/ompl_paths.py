@@ -8,18 +8,32 @@
   is mounted on the palm) or a link of another finger, and its non-adjacent links keep apart.
   Distances to disks and spheres are exact; to boxes and polygons they are evaluated at points
   along the link at most ``min_radius`` apart (so the error is below ``min_radius / 2``, and
-  the capsule radius is inflated by that amount). A link starting at its finger's base joint is
-  not checked against fixed bodies over its first ``BASE_TRIM`` (15 %) of length (the joint is
-  mounted on the palm), and a link that already overlaps a fixed body in the scene as given is
-  taken to be mounted on it and not checked against fixed bodies.
-* **Transfer** (regrasp D -> F, eq. 33 with ``dr = 0``): inverse kinematics by CasADi/IPOPT for
-  the fingertip at a contact point on the object surface, approaching along the normal; OMPL
-  (RRTConnect, seeded) plans from the finger's configuration to a pre-contact configuration
-  ``clearance`` outside the surface; the last approach is a joint-space segment on which only
-  the tip may touch. :func:`path_clearance_certified` then checks every path with a Lipschitz
-  certificate (every configuration, not only samples, is collision-free: the clearance at a
-  sample bounds how far the joints may move before a capsule can touch), falling back to 1 mm
-  steps where the clearance is tiny.
+  the capsule radius is inflated by that amount; for boxes the signed distance is convex along a
+  segment, so 17 coarse samples bracket its minimum and only that bracket is sampled finely). A
+  link starting at its finger's base joint is not checked against fixed bodies over its first
+  ``BASE_TRIM`` (15 %) of length (the joint is mounted on the palm), and a link that already
+  overlaps a fixed body in the scene as given is taken to be mounted on it and not checked
+  against fixed bodies. :meth:`CollisionModel.clearance_terms` evaluates every (link, obstacle)
+  pair of a finger at once with numpy (segment-segment, segment-sphere and segment-box distances
+  vectorised over the pairs).
+* **Overlaps at the start of a motion.** A grasp given by the scene may have capsules that
+  overlap slightly (the Allegro example: the middle and ring links 0.3 mm into the object with
+  the inflated radius, two non-adjacent thumb links 3 mm into each other, because the link
+  radius is a coarse stand-in for the real geometry). Every motion (retreat, transfer, object
+  motion, and the certificate of :func:`path_clearance_certified`) takes the overlaps present at
+  its first configuration as an allowance (:meth:`CollisionModel.start_allowance`, per pair):
+  such a pair may keep its overlap or reduce it but never deepen it; every other pair must stay
+  collision-free as before. Without overlaps at the start the check is unchanged.
+* **Transfer** (regrasp D -> F, eq. 33 with ``dr = 0``): inverse kinematics for the fingertip at
+  a contact point on the object surface, approaching along the normal (scene serial chains:
+  CasADi/IPOPT; URDF fingers: :func:`numeric_ik`, damped least squares on the pinocchio point
+  Jacobians within the URDF joint limits); OMPL (RRTConnect, seeded, bounded by the joint
+  limits) plans from the finger's configuration to a pre-contact configuration ``clearance``
+  outside the surface; the last approach is a joint-space segment on which only the tip may
+  touch. :func:`path_clearance_certified` then checks every path with a Lipschitz certificate
+  (every configuration, not only samples, is collision-free: the clearance at a sample bounds
+  how far the joints may move before a capsule can touch), falling back to 1 mm steps where the
+  clearance is tiny.
 * **Object motion** (eq. 30-32) on ``A_c [dq; dr] = 0``: the motion is prescribed (the DAFC
   direction and the finger motion ``dq`` chosen by (31)), so it is integrated in small steps and
   each step projected back onto the contact manifold (Gauss-Newton on ``q`` for the F-points:
@@ -31,18 +45,18 @@
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import casadi as ca
 import numpy as np
 
 from analysis._types import Array
-from analysis.exceptions import SolverError
 from analysis.geometry import shape_signed_distance
 from analysis.kinematics import BodyRef, HandKinematics, SerialChain, segment_distance
-from analysis.rotations import rotvec_to_matrix
+from analysis.rotations import rotvec_to_matrix, skew
 from analysis.scene import Box, Disk, Scene, Segment, Sphere
 from planner.state import GraspContact, GraspState
 
@@ -51,6 +65,7 @@ DENSE_STEP = 1e-3
 #: Fraction of a link starting at the finger's base joint that is not checked against fixed bodies
 #: (the joint housing is mounted on the palm).
 BASE_TRIM = 0.15
+_EYE3 = np.eye(3)
 
 
 # --------------------------------------------------------------------------------------------
@@ -104,6 +119,97 @@ def _shape_segment_distance(shape: object, a: Array, b: Array, dim: int, step: f
     return float(best)
 
 
+def segment_segment_distances(A0: Array, A1: Array, B0: Array, B1: Array) -> Array:
+    """Distances ``(N,)`` between the segments ``[A0[i], A1[i]]`` and ``[B0[i], B1[i]]``
+    (arrays ``(N, dim)``): :func:`segment_segment_distance` vectorised over the pairs."""
+    d1, d2, r = A1 - A0, B1 - B0, A0 - B0
+    a = (d1 * d1).sum(axis=1)
+    e = (d2 * d2).sum(axis=1)
+    f = (d2 * r).sum(axis=1)
+    c = (d1 * r).sum(axis=1)
+    b = (d1 * d2).sum(axis=1)
+    a_s = np.where(a > 1e-15, a, 1.0)  # a point A: c = b = 0, the formulas below give s = 0
+    e_ok = e > 1e-15
+    e_s = np.where(e_ok, e, 1.0)
+    den = a * e - b * b
+    big = den > 1e-15
+    s = np.where(big, np.minimum(np.maximum((b * f - c * e) / np.where(big, den, 1.0), 0.0), 1.0), 0.0)
+    t = (b * s + f) / e_s
+    s = np.where(t < 0.0, np.minimum(np.maximum(-c / a_s, 0.0), 1.0),
+                 np.where(t > 1.0, np.minimum(np.maximum((b - c) / a_s, 0.0), 1.0), s))
+    t = np.minimum(np.maximum(t, 0.0), 1.0)
+    s = np.where(e_ok, s, np.minimum(np.maximum(-c / a_s, 0.0), 1.0))  # a point B
+    t = np.where(e_ok, t, 0.0)
+    diff = (A0 + s[:, None] * d1) - (B0 + t[:, None] * d2)
+    return np.sqrt((diff * diff).sum(axis=1))
+
+
+def _shape_segments_distance(shape: object, A: Array, B: Array, dim: int, step: float) -> Array:
+    """Signed distances ``(N,)`` from the segments ``[A[i], B[i]]`` (shape frame, ``(N, dim)``)
+    to a shape: :func:`_shape_segment_distance` vectorised over the segments (boxes: sampled at
+    most ``step`` apart along every segment)."""
+    if isinstance(shape, Disk | Sphere):
+        ab = B - A
+        L2 = np.einsum("ij,ij->i", ab, ab)
+        t = np.clip(-np.einsum("ij,ij->i", A, ab) / np.where(L2 > 0.0, L2, 1.0), 0.0, 1.0)
+        t = np.where(L2 > 0.0, t, 0.0)
+        return np.linalg.norm(A + t[:, None] * ab, axis=1) - shape.radius
+    if isinstance(shape, Segment):
+        p0, p1 = (np.broadcast_to(np.asarray(p, float)[:dim], A.shape) for p in shape.points)
+        return segment_segment_distances(A, B, p0, p1)
+    if isinstance(shape, Box):
+        c = np.asarray(shape.position if shape.position is not None else np.zeros(dim), dtype=float)[:dim]
+        h = np.asarray(shape.size, dtype=float)[:dim] / 2.0
+        return _box_segments_distance(c, h, A, B, step)
+    return np.array([_shape_segment_distance(shape, a, b, dim, step) for a, b in zip(A, B, strict=True)])
+
+
+@functools.lru_cache(maxsize=256)
+def _unit_samples(n: int) -> Array:
+    """``linspace(0, 1, n)`` (cached; never modified)."""
+    return np.linspace(0.0, 1.0, n)
+
+
+def _box_sd(P: Array, c: Array, h: Array) -> Array:
+    qd = np.abs(P - c) - h
+    out = np.maximum(qd, 0.0)
+    return np.sqrt((out * out).sum(axis=-1)) + np.minimum(qd.max(axis=-1), 0.0)
+
+
+def _box_segments_distance(c: Array, h: Array, A: Array, B: Array, step: float, coarse: int = 17) -> Array:
+    """Signed distances ``(N,)`` from the segments ``[A[i], B[i]]`` to the box of centre ``c`` and
+    half-extents ``h``, sampled at most ``step`` apart near the minimum. The signed distance to a
+    convex set is convex along a segment, so its minimum lies within one coarse interval of the
+    best of ``coarse`` evenly spaced samples; only those two intervals are sampled finely."""
+    D = B - A
+    L = float(np.sqrt((D * D).sum(axis=1).max())) if len(A) else 0.0
+    n = max(2, int(np.ceil(L / step)) + 1)
+    if n <= 2 * coarse:  # short segments: sample them whole
+        T = _unit_samples(n)
+        return _box_sd(A[:, None, :] + T[None, :, None] * D[:, None, :], c, h).min(axis=1)
+    T = _unit_samples(coarse)
+    k = _box_sd(A[:, None, :] + T[None, :, None] * D[:, None, :], c, h).argmin(axis=1)
+    lo, hi = T[np.maximum(k - 1, 0)], T[np.minimum(k + 1, coarse - 1)]
+    nf = max(2, int(np.ceil(2.0 * L / (coarse - 1) / step)) + 1)
+    tf = lo[:, None] + _unit_samples(nf)[None, :] * (hi - lo)[:, None]  # (N, nf)
+    return _box_sd(A[:, None, :] + tf[:, :, None] * D[:, None, :], c, h).min(axis=1)
+
+
+@dataclass(frozen=True)
+class _FingerData:
+    """Static data of one finger for the vectorised clearance."""
+
+    refs: list[BodyRef]
+    r_infl: Array  # (n,) capsule radii (inflated by half the sample step)
+    r_true: Array  # (n,) true link radii
+    fixed_checked: Array  # (n,) bool: the link is checked against fixed bodies (not mounted)
+    any_fixed: bool  # some link is checked against fixed bodies
+    base: Array  # (dim,) base joint position
+    pairs: Array  # (p, 2) own non-adjacent link pairs, then (own link, link of another checked finger)
+    pair_radii: Array  # (p,) sum of the capsule radii of each pair
+    rot_K: list[tuple[Array, Array]] | None  # serial chains: (K, K @ K) of every joint axis
+
+
 @dataclass(frozen=True)
 class CollisionModel:
     """Capsule model of the hand against the object, the fixed bodies and the other fingers."""
@@ -114,6 +220,7 @@ class CollisionModel:
     sample_step: float
     finger_pairs: frozenset[tuple[int, int]]  # (i, j), i < j: pairs of fingers checked against each other
     mounted: frozenset[tuple[int, int]]  # (finger, link) overlapping a fixed body in the scene: not checked
+    _cache: dict[Any, Any] = field(default_factory=dict, compare=False, repr=False)
 
     @classmethod
     def of(cls, scene: Scene, hand: HandKinematics, min_radius: float | None = None) -> CollisionModel:
@@ -170,39 +277,145 @@ class CollisionModel:
         position: Array,
         rotation: Array,
         touching: Sequence[BodyRef] = (),
+        allowance: Array | None = None,
     ) -> float:
         """Smallest clearance (distance minus capsule radii) of the links of ``finger`` at the hand
         configuration ``q`` ``(M,)``; negative means collision. Links in ``touching`` may touch
-        the object with their true radius (their clearance to the object is not counted)."""
-        best = np.inf
-        touch = {(t.finger, t.link) for t in touching}
-        own = self.links(finger)
-        segs = self.segments(finger, q)
-        for ref in own:
-            a, b = segs[ref.link]
-            r = self.radius(ref)
-            if (ref.finger, ref.link) not in touch:
-                best = min(best, self.object_distance(a, b, position, rotation) - r)
-            else:  # touching: the link axis may not sink deeper than the true radius
-                best = min(best, max(0.0, self.object_distance(a, b, position, rotation)
-                                     - self.hand.body_radius(ref) + 1e-9))
-            if self.scene.fixed_bodies and (finger, ref.link) not in self.mounted:
-                best = min(best, self._fixed_clearance(finger, ref.link, a, b))
-        for k1 in own:  # non-adjacent links of the same finger
-            for k2 in own:
-                if k2.link >= k1.link + 2:
-                    a1, b1 = segs[k1.link]
-                    a2, b2 = segs[k2.link]
-                    best = min(best, segment_segment_distance(a1, b1, a2, b2) - self.radius(k1) - self.radius(k2))
-        for j in range(len(self.hand.fingers)):
-            if j == finger or (min(j, finger), max(j, finger)) not in self.finger_pairs:
-                continue
-            for other in self.links(j):
-                c, e = self.hand.body_segment(other, q)
-                for ref in own:
-                    a, b = segs[ref.link]
-                    best = min(best, segment_segment_distance(a, b, c, e) - self.radius(ref) - self.radius(other))
-        return float(best)
+        the object with their true radius (their clearance to the object is not counted).
+        ``allowance`` (``<= 0``, laid out as :meth:`clearance_terms`) lowers the bound of each
+        term: an overlap that exists at the start of a motion may persist but not grow."""
+        terms = self.clearance_terms(finger, q, position, rotation, touching)
+        if allowance is not None:
+            terms = terms - allowance
+        return float(terms.min()) if terms.size else float(np.inf)
+
+    def start_allowance(self, finger: int, q: Array, position: Array, rotation: Array) -> Array:
+        """The overlaps ``min(0, term)`` of :meth:`clearance_terms` at the start ``q`` of a motion
+        (no link touching): a motion may keep them but not deepen them (see the module notes)."""
+        return np.minimum(0.0, self.clearance_terms(finger, q, position, rotation))
+
+    def clearance_terms(
+        self,
+        finger: int,
+        q: Array,
+        position: Array,
+        rotation: Array,
+        touching: Sequence[BodyRef] = (),
+    ) -> Array:
+        """Every clearance of :meth:`finger_clearance`, one per (link, obstacle) pair, vectorised:
+        ``[object (n), fixed bodies (n), own non-adjacent link pairs, links of other fingers]``
+        (the layout depends on the finger only; pairs that are not checked are ``inf``)."""
+        fd = self._finger_data(finger)
+        n = len(fd.refs)
+        d = self.scene.dim
+        A, B = self.segment_arrays(finger, q)
+        R = np.asarray(rotation, dtype=float)[:d, :d]
+        pos = np.asarray(position, dtype=float)[:d]
+        od = _shape_segments_distance(self.scene.object.shape, (A - pos) @ R, (B - pos) @ R, d, self.sample_step)
+        # a link beyond the last joint (a URDF tip link) is the end of the last capsule
+        touch = np.zeros(n, dtype=bool)
+        for t in touching:
+            if t.finger == finger and t.link is not None:
+                touch[min(int(t.link), n - 1)] = True
+        parts = [np.where(touch, np.maximum(0.0, od - fd.r_true + 1e-9), od - fd.r_infl)]
+        fixed = np.full(n, np.inf)
+        if fd.any_fixed:
+            D = B - A
+            L = np.sqrt((D * D).sum(axis=1))
+            Ab = A - fd.base
+            at_base = (Ab * Ab).sum(axis=1) < 1e-18
+            trim = np.maximum(3.0 * fd.r_infl, BASE_TRIM * L)
+            skip = at_base & (2.0 * trim >= L)
+            A2 = np.where(at_base[:, None], A + D * (trim / np.where(L > 0, L, 1.0))[:, None], A)
+            dist = np.full(n, np.inf)
+            for fb in self.scene.fixed_bodies:
+                dist = np.minimum(dist, _shape_segments_distance(fb.shape, A2, B, d, self.sample_step))
+            fixed = np.where(fd.fixed_checked & ~skip, dist - fd.r_infl, np.inf)
+        parts.append(fixed)
+        others = [j for j in range(len(self.hand.fingers))
+                  if j != finger and (min(j, finger), max(j, finger)) in self.finger_pairs]
+        if others:  # own non-adjacent pairs and every pair with another finger's links, at once
+            segs = [self._segments_cached(j, q) for j in others]
+            S0 = np.vstack([A, *(sg[0] for sg in segs)])
+            S1 = np.vstack([B, *(sg[1] for sg in segs)])
+        else:
+            S0, S1 = A, B
+        i, j = fd.pairs[:, 0], fd.pairs[:, 1]
+        if len(i):
+            parts.append(segment_segment_distances(S0[i], S1[i], S0[j], S1[j]) - fd.pair_radii)
+        return np.concatenate(parts)
+
+    def _finger_data(self, finger: int) -> _FingerData:
+        got = self._cache.get(("finger", finger))
+        if got is None:
+            chain = self.hand.fingers[finger]
+            refs = self.links(finger)
+            n = len(refs)
+            sl = self.hand.finger_slice(finger)
+            rot_K = None
+            if isinstance(chain, SerialChain):
+                rot_K = [(skew(a), skew(a) @ skew(a)) for a in chain.axes]
+            r_infl = np.array([self.radius(r) for r in refs])
+            radii = [r_infl]  # of the stacked segments: own links, then the other checked fingers'
+            for j in range(len(self.hand.fingers)):
+                if j != finger and (min(j, finger), max(j, finger)) in self.finger_pairs:
+                    radii.append(np.array([self.radius(r) for r in self.links(j)]))
+            stacked = np.concatenate(radii)
+            pairs = [(i, j) for i in range(n) for j in range(i + 2, n)]
+            pairs += [(i, j) for i in range(n) for j in range(n, len(stacked))]
+            pa = np.array(pairs, dtype=int).reshape(-1, 2)
+            fixed_checked = np.array([bool(self.scene.fixed_bodies) and (finger, k) not in self.mounted
+                                      for k in range(n)], dtype=bool)
+            got = _FingerData(
+                refs,
+                r_infl,
+                np.array([self.hand.body_radius(r) for r in refs]),
+                fixed_checked,
+                bool(fixed_checked.any()),
+                np.asarray(chain.body_pose(0, self.hand.q0[sl])[1][: self.scene.dim], dtype=float),
+                pa,
+                stacked[pa[:, 0]] + stacked[pa[:, 1]],
+                rot_K,
+            )
+            self._cache[("finger", finger)] = got
+        return got
+
+    def _segments_cached(self, finger: int, q: Array) -> tuple[Array, Array]:
+        """:meth:`segment_arrays` of a finger that does not move (cached by its joint values)."""
+        sl = self.hand.finger_slice(finger)
+        key = ("segs", finger, np.asarray(q[sl], dtype=float).tobytes())
+        got = self._cache.get(key)
+        if got is None:
+            if len(self._cache) > 4096:
+                for k in [k for k in self._cache if k[0] == "segs"]:
+                    del self._cache[k]
+            got = self.segment_arrays(finger, q)
+            self._cache[key] = got
+        return got
+
+    def segment_arrays(self, finger: int, q: Array) -> tuple[Array, Array]:
+        """World end points ``(n, dim)``, ``(n, dim)`` of the link axes of ``finger`` at the hand
+        configuration ``q`` (serial chains: one forward-kinematics pass, Rodrigues' formula with
+        the joint axes' cross-product matrices precomputed)."""
+        chain = self.hand.fingers[finger]
+        d = self.scene.dim
+        qf = np.asarray(q, dtype=float)[self.hand.finger_slice(finger)]
+        fd = self._finger_data(finger)
+        n = len(fd.refs)
+        A = np.empty((n, 3))
+        B = np.empty((n, 3))
+        if isinstance(chain, SerialChain) and fd.rot_K is not None:
+            R, p = chain.base_R, chain.base_p
+            for k in range(n):
+                p = p + R @ chain.origins[k]
+                K, K2 = fd.rot_K[k]
+                R = R @ (_EYE3 + np.sin(qf[k]) * K + (1.0 - np.cos(qf[k])) * K2)
+                end = chain.origins[k + 1] if k + 1 < n else chain.tip
+                A[k], B[k] = p, p + R @ end
+        else:
+            for k in range(n):
+                A[k], B[k] = chain.body_segment(k, qf)
+        return A[:, :d], B[:, :d]
 
     def _fixed_clearance(self, finger: int, link: int, a: Array, b: Array) -> float:
         """Clearance of a link to the fixed bodies; a link starting at the finger's base joint
@@ -219,18 +432,9 @@ class CollisionModel:
         return self.fixed_distance(a, b) - r
 
     def segments(self, finger: int, q: Array) -> dict[int, tuple[Array, Array]]:
-        """World end points of every link axis of ``finger`` at the hand configuration ``q``
-        (one forward-kinematics pass for serial chains)."""
-        chain = self.hand.fingers[finger]
-        d = self.scene.dim
-        if isinstance(chain, SerialChain):
-            Rs, ps = chain.frames(q[self.hand.finger_slice(finger)])
-            out = {}
-            for k in range(chain.n_joints):
-                end = chain.origins[k + 1] if k + 1 < chain.n_joints else chain.tip
-                out[k] = (ps[k][:d], (ps[k] + Rs[k] @ end)[:d])
-            return out
-        return {k.link: self.hand.body_segment(k, q) for k in self.links(finger)}
+        """World end points of every link axis of ``finger`` at the hand configuration ``q``."""
+        A, B = self.segment_arrays(finger, q)
+        return {k: (A[k], B[k]) for k in range(A.shape[0])}
 
     def lipschitz(self, finger: int) -> float:
         """Bound on the speed of any point of the finger per unit joint motion (``|dx| <= K |dq|``):
@@ -254,16 +458,24 @@ def path_clearance_certified(
     rotation: Array,
     touching_last: Sequence[BodyRef] = (),
     touch_from: int | None = None,
+    allowance: Array | None = None,
 ) -> tuple[bool, float, int]:
     """Check the whole polyline ``path`` (not only its samples): from each checked configuration
     the next one is at most ``clearance / K`` away in joint space (so every configuration in
     between is collision-free), never less than :data:`DENSE_STEP`. Segments from waypoint
     ``touch_from`` on may touch the object with the links ``touching_last``.
 
+    Overlaps present at the first waypoint (``allowance``, by default
+    :meth:`CollisionModel.start_allowance` there) may persist but not deepen: the clearance
+    checked is ``min(term - allowance)`` over every (link, obstacle) term.
+
     Returns ``(collision_free, smallest clearance, configurations checked)``."""
     K = model.lipschitz(finger)
     sl = model.hand.finger_slice(finger)
     q = np.array(q_full, dtype=float)
+    if allowance is None and len(path):
+        q[sl] = path[0]
+        allowance = model.start_allowance(finger, q, position, rotation)
     worst, checks = np.inf, 0
     for s in range(len(path) - 1):
         touching = touching_last if touch_from is not None and s >= touch_from else ()
@@ -272,7 +484,7 @@ def path_clearance_certified(
         t = 0.0
         while True:
             q[sl] = p0 + (p1 - p0) * (t / L if L > 0 else 0.0)
-            c = model.finger_clearance(finger, q, position, rotation, touching)
+            c = model.finger_clearance(finger, q, position, rotation, touching, allowance)
             checks += 1
             worst = min(worst, c)
             if c < 0.0:
@@ -324,6 +536,71 @@ def _ik_solver(chain: SerialChain, dim: int) -> Any:
     return solver
 
 
+def joint_limits(hand: HandKinematics, finger: int) -> tuple[Array, Array]:
+    """Lower and upper joint limits ``(n,)`` of a finger (a URDF finger's ``lower``/``upper``;
+    unbounded for scene serial chains)."""
+    chain = hand.fingers[finger]
+    n = chain.n_joints
+    lo = getattr(chain, "lower", None)
+    hi = getattr(chain, "upper", None)
+    lo_a = np.full(n, -np.inf) if lo is None else np.asarray(lo, dtype=float)
+    hi_a = np.full(n, np.inf) if hi is None else np.asarray(hi, dtype=float)
+    return lo_a, hi_a
+
+
+def numeric_ik(
+    hand: HandKinematics,
+    finger: int,
+    target: Array,  # (d,)
+    normal: Array,  # (d,) unit, into the object
+    seed: Array,  # (n,)
+    min_alignment: float = 0.5,
+    iters: int = 200,
+    damping: float = 1e-3,
+) -> Array | None:
+    """Inverse kinematics of any :class:`~analysis.kinematics.FingerModel` from its point
+    Jacobians: damped least squares from ``seed`` on the tip position (the end of the last link's
+    axis) at ``target``, with one more row raising the alignment ``u . normal`` of the last link
+    (unit axis ``u``) while it is below ``min_alignment + 0.05``; every iterate is clipped to the
+    joint limits (:func:`joint_limits`). Returns the joints ``(n,)`` or ``None`` if it does not
+    converge (tip error above 1e-9 or alignment below ``min_alignment``)."""
+    chain = hand.fingers[finger]
+    d = hand.dim
+    k = chain.n_joints - 1
+    lo, hi = joint_limits(hand, finger)
+    q = np.clip(np.asarray(seed, dtype=float), lo, hi)
+    target = np.asarray(target, dtype=float)[:d]
+    normal = np.asarray(normal, dtype=float)[:d]
+    for _ in range(iters):
+        a, b = chain.body_segment(k, q)
+        a, b = a[:d], b[:d]
+        L = float(np.linalg.norm(b - a))
+        u = (b - a) / max(L, 1e-12)
+        err = target - b
+        align = float(u @ normal)
+        if float(np.linalg.norm(err)) < 1e-9 and align >= min_alignment - 1e-9:
+            return q
+        Jb = chain.point_jacobian(k, np.r_[b, np.zeros(3 - d)] if d < 3 else b, q)[:d]
+        rows, errs = [Jb], [err]
+        if align < min_alignment + 0.05 and L > 1e-9:
+            Ja = chain.point_jacobian(k, np.r_[a, np.zeros(3 - d)] if d < 3 else a, q)[:d]
+            du = (np.eye(d) - np.outer(u, u)) @ (Jb - Ja) / L  # (d, n)
+            rows.append((normal @ du)[None, :])
+            errs.append(np.array([min_alignment + 0.1 - align]))
+        J = np.vstack(rows)
+        e = np.concatenate(errs)
+        dq = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(J.shape[0]), e)
+        nrm = float(np.linalg.norm(dq))
+        if nrm > 0.3:
+            dq *= 0.3 / nrm
+        q = np.clip(q + dq, lo, hi)
+    a, b = chain.body_segment(k, q)
+    u = (b[:d] - a[:d]) / max(float(np.linalg.norm(b[:d] - a[:d])), 1e-12)
+    if float(np.linalg.norm(target - b[:d])) < 1e-9 and float(u @ normal) >= min_alignment - 1e-9:
+        return q
+    return None
+
+
 def fingertip_ik(
     hand: HandKinematics,
     finger: int,
@@ -333,19 +610,23 @@ def fingertip_ik(
     min_alignment: float = 0.5,
 ) -> list[Array]:
     """Joint configurations ``(n,)`` of ``finger`` whose tip is at ``target`` with the last link
-    pointing into the object (``link direction . normal >= min_alignment``), closest to each seed
-    (CasADi/IPOPT: ``min |q - seed|^2`` subject to those constraints).
+    pointing into the object (``link direction . normal >= min_alignment``), closest to each seed.
 
-    Only serial-chain fingers (2-D links, 3-D axis/origin joints) have a symbolic model; a URDF
-    finger raises :class:`SolverError`."""
+    Serial chains of the scene: CasADi/IPOPT, ``min |q - seed|^2`` subject to those constraints.
+    Any other finger (URDF, evaluated by pinocchio): :func:`numeric_ik` (damped least squares on
+    the point Jacobians, within the joint limits)."""
     chain = hand.fingers[finger]
-    if not isinstance(chain, SerialChain):
-        raise SolverError("CasADi", f"no symbolic kinematics for finger '{chain.name}' (URDF): no IK")
     d = hand.dim
+    out: list[Array] = []
+    if not isinstance(chain, SerialChain):
+        for s in seeds:
+            x = numeric_ik(hand, finger, target, normal, np.asarray(s, dtype=float), min_alignment)
+            if x is not None and all(np.linalg.norm(x - o) > 1e-6 for o in out):
+                out.append(x)
+        return out
     solver = _ik_solver(chain, d)
     lbg = np.r_[np.zeros(d), min_alignment]
     ubg = np.r_[np.zeros(d), np.inf]
-    out: list[Array] = []
     for s in seeds:
         s = np.asarray(s, dtype=float)
         sol = solver(x0=s, p=np.r_[s, target[:d], normal[:d]], lbg=lbg, ubg=ubg)
@@ -398,16 +679,20 @@ def plan_transfer(
     m = sl.stop - sl.start
     q_full = state.q.copy()
     pos, rot = state.position, state.rotation
+    allow = model.start_allowance(finger, q_full, pos, rot)  # overlaps at the start may not deepen
     # pre-contact: back the joints off along the last link until the clearance is positive
-    q_pre = _back_off(model, finger, q_full, q_goal, tip_ref, approach, pos, rot)
+    q_pre = _back_off(model, finger, q_full, q_goal, tip_ref, approach, pos, rot, allow)
     if q_pre is None:
         return None
     start = state.q[sl]
+    j_lo, j_hi = joint_limits(hand, finger)
 
     def valid_q(x: Array) -> bool:
+        if np.any(x < j_lo - 1e-9) or np.any(x > j_hi + 1e-9):
+            return False
         qq = q_full.copy()
         qq[sl] = x
-        return model.finger_clearance(finger, qq, pos, rot) >= 0.0
+        return model.finger_clearance(finger, qq, pos, rot, (), allow) >= 0.0
 
     if not valid_q(start):
         return None
@@ -415,8 +700,8 @@ def plan_transfer(
     ou.RNG.setSeed(int(seed) + 1)
     space = ob.RealVectorStateSpace(m)
     bounds = ob.RealVectorBounds(m)
-    lo = np.minimum(start, q_pre) - np.pi
-    hi = np.maximum(start, q_pre) + np.pi
+    lo = np.maximum(np.minimum(start, q_pre) - np.pi, np.minimum(j_lo, np.minimum(start, q_pre)))
+    hi = np.minimum(np.maximum(start, q_pre) + np.pi, np.maximum(j_hi, np.maximum(start, q_pre)))
     for j in range(m):
         bounds.setLow(j, float(lo[j]))
         bounds.setHigh(j, float(hi[j]))
@@ -444,7 +729,8 @@ def plan_transfer(
         free = np.array([[p.getState(i)[j] for j in range(m)] for i in range(p.getStateCount())])
         waypoints = np.vstack([free, q_goal[None, :]])
         ok, clear, checks = path_clearance_certified(
-            model, finger, q_full, waypoints, pos, rot, touching_last=[tip_ref], touch_from=len(free) - 1
+            model, finger, q_full, waypoints, pos, rot, touching_last=[tip_ref], touch_from=len(free) - 1,
+            allowance=allow,
         )
         if ok:
             break
@@ -464,6 +750,7 @@ def _back_off(
     approach: float,
     pos: Array,
     rot: Array,
+    allowance: Array | None = None,
 ) -> Array | None:
     """A configuration near ``q_goal`` whose tip is ``approach`` back along the tip's velocity
     that leaves the surface (least-squares step on the tip Jacobian) and that is collision-free."""
@@ -481,8 +768,8 @@ def _back_off(
             if np.linalg.norm(err) < 1e-9:
                 break
             J = hand.point_jacobian(tip_ref, tip, x)[:, sl]
-            x[sl] = x[sl] + np.linalg.lstsq(J, err, rcond=None)[0]
-        if model.finger_clearance(finger, x, pos, rot) > 0.0:
+            x[sl] = np.clip(x[sl] + np.linalg.lstsq(J, err, rcond=None)[0], *joint_limits(hand, finger))
+        if model.finger_clearance(finger, x, pos, rot, (), allowance) > 0.0:
             return np.asarray(x[sl])
     return None
 
@@ -564,6 +851,8 @@ def integrate_object_motion(
     qs, poses = [q.copy()], [state.pose_vector()]
     worst_res = 0.0
     busy = [hand.resolve_body(state.contacts[i].body) for i in (*sticking, *separating)]
+    allow = [model.start_allowance(f, state.q, state.position, state.rotation) for f in range(len(hand.fingers))]
+    limits = [joint_limits(hand, f) for f in range(len(hand.fingers))]
     for _ in range(steps):
         cur = moved(cur, h * dr)
         q, res = project_contacts(hand, cur, q + h * dq, sticking)
@@ -575,7 +864,10 @@ def integrate_object_motion(
         poses.append(cur.pose_vector())
         for f in range(len(hand.fingers)):
             touching = [b for b in busy if b is not None and b.finger == f]
-            if model.finger_clearance(f, q, cur.position, cur.rotation, touching) < -1e-9:
+            qf = q[hand.finger_slice(f)]
+            if np.any(qf < limits[f][0] - 1e-9) or np.any(qf > limits[f][1] + 1e-9):
+                return None
+            if model.finger_clearance(f, q, cur.position, cur.rotation, touching, allow[f]) < -1e-9:
                 return None
     seps = []
     for i in separating:
