@@ -289,7 +289,7 @@ def simulate(
 @app.command()
 def plan(
     scene: Annotated[Path, typer.Argument(help="scene file (.json, .yaml)")],
-    goal: Annotated[str, typer.Option(help="active | passive | combination | pose")] = "active",
+    goal: Annotated[str, typer.Option(help="active | passive | fingertips | combination | pose")] = "active",
     combination: Annotated[str | None, typer.Option(help="goal combination, e.g. FSDD (--goal combination)")] = None,
     pose: Annotated[str | None, typer.Option(help="goal pose: 2-D 'x y theta', 3-D 'x y z rx ry rz'")] = None,
     tolerance: Annotated[float, typer.Option(help="pose tolerance (scene units and radians)")] = 0.05,
