@@ -28,6 +28,7 @@ import numpy as np
 
 from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
+from analysis.exceptions import SolverError
 from analysis.friction import FrictionSet, kinetic_friction
 from analysis.motion import MotionSpace
 from analysis.solvers.cdd import Generators, cone_generators
@@ -224,9 +225,14 @@ class DAFCOracle:
         w_ex = self.system.w_ex
         c = G_eff.T @ dr
         target = 1.0 + float(np.linalg.norm(w_ex)) - float(dr @ w_ex)
-        res = solve_lp(np.zeros(len(c)), A_ub=fs.C, b_ub=np.zeros(fs.C.shape[0]),
-                       A_eq=np.vstack([self.Xi.T @ G_eff, c[None, :]]),
-                       b_eq=np.concatenate([-(self.Xi.T @ w_ex), [target]]))
+        try:
+            res = solve_lp(np.zeros(len(c)), A_ub=fs.C, b_ub=np.zeros(fs.C.shape[0]),
+                           A_eq=np.vstack([self.Xi.T @ G_eff, c[None, :]]),
+                           b_eq=np.concatenate([-(self.Xi.T @ w_ex), [target]]))
+        except SolverError:
+            # The membership is already decided (the main LP proved the work unbounded); only the
+            # optional certificate forces are missing, which DirectionTest allows (forces=None).
+            return None
         return res.x if res.found else None
 
     # -- membership -----------------------------------------------------------------------------

@@ -24,6 +24,10 @@ INF = highspy.kHighsInf
 #: HiGHS primal/dual feasibility tolerance.
 FEAS_TOL = 1e-10
 
+#: Statuses after which the solve is repeated (fresh, then with HiGHS' default settings): an
+#: undecided run, not an answer.
+_RETRY = (highspy.HighsModelStatus.kUnknown, highspy.HighsModelStatus.kSolveError, highspy.HighsModelStatus.kNotset)
+
 Status = Literal["optimal", "infeasible", "unbounded"]
 
 
@@ -122,12 +126,12 @@ class LPModel:
         self._h.changeColsCost(self.n, self._idx, sense * c)
         self._h.run()
         ms = self._h.getModelStatus()
-        if ms in (highspy.HighsModelStatus.kUnknown, highspy.HighsModelStatus.kSolveError):
+        if ms in _RETRY:
             # a warm start from an unbounded/degenerate basis can end undecided: solve afresh
             self._h.clearSolver()
             self._h.run()
             ms = self._h.getModelStatus()
-        if ms in (highspy.HighsModelStatus.kUnknown, highspy.HighsModelStatus.kSolveError):
+        if ms in _RETRY:
             # primal simplex without presolve can still fail on a near-degenerate model (seen on
             # the Allegro scene): once more with HiGHS' defaults, then back to the warm settings
             self._h.setOptionValue("presolve", "choose")
