@@ -191,7 +191,7 @@ class DAFCOracle:
             )
         return self._lp
 
-    def work_sup(self, dr: Array, zeta_c: Array) -> tuple[float, Array | None]:
+    def work_sup(self, dr: Array, zeta_c: Array, witness: bool = True) -> tuple[float, Array | None]:
         """``sup dr^T (G_c f + w_s + w_ex)`` over the admissible forces for the motion ``zeta_c``."""
         st = self.st
         w_ex = self.system.w_ex
@@ -213,7 +213,7 @@ class DAFCOracle:
         res = model.solve(G_eff.T @ dr, maximize=True)
         self.lp_count += 1
         if res.status == "unbounded":
-            return np.inf, self._witness(G_eff, dr)
+            return np.inf, self._witness(G_eff, dr) if witness else None
         if res.status == "infeasible":
             return -np.inf, None
         assert res.objective is not None
@@ -237,13 +237,16 @@ class DAFCOracle:
 
     # -- membership -----------------------------------------------------------------------------
 
-    def test(self, dr: Array, zeta_r: Array | None = None, screen: bool = True, quick: bool = False) -> DirectionTest:
+    def test(
+        self, dr: Array, zeta_r: Array | None = None, screen: bool = True, quick: bool = False, witness: bool = True
+    ) -> DirectionTest:
         """Is the object direction ``dr`` (any scale, in the motion space) in DAFC?
 
         ``screen``: with S-points, first try to prove non-membership with the relaxation
         (:meth:`relaxed_work_sup`), which is exact when it says no. ``quick``: when the slips
         depend on the redundancy, try only the friction-aligned and the least-L1 redundancies
-        (not the seeded random ones).
+        (not the seeded random ones). ``witness``: for an unbounded supremum, also return forces
+        with positive work (one more LP); sampling the set does without.
         """
         ms = self.ms
         dr = np.asarray(dr, dtype=float)
@@ -291,7 +294,7 @@ class DAFCOracle:
                     last = DirectionTest(dr, u, zc, False, np.nan,
                                          f"S-point {still[0]} does not slide for this motion", self.exact)
                     continue
-            sup, f = self.work_sup(dr, zc)
+            sup, f = self.work_sup(dr, zc, witness)
             if sup > WORK_TOL * scale:
                 return DirectionTest(dr, u, zc, True, sup, "member", self.exact, f)
             last = DirectionTest(dr, u, zc, False, sup, "the fingers cannot do positive work", self.exact, f)
@@ -475,7 +478,7 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
         # without S-points: A_r minus a convex cone, decided on the generators; with a_bar = 1 the
         # only directions are the (at most two) generators, each decided by the exact oracle
         for u in generators:
-            t = oracle.test(ms.Lambda_r_t @ u)
+            t = oracle.test(ms.Lambda_r_t @ u, witness=False)
             if t.member:
                 return t, cone_dim, True
         return None, 0, True
@@ -490,7 +493,7 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
         if np.linalg.norm(v) > 1e-9:
             interior.append(v / np.linalg.norm(v))
     for u in interior:
-        t = oracle.test(ms.Lambda_r_t @ u, screen=False, quick=True)
+        t = oracle.test(ms.Lambda_r_t @ u, screen=False, quick=True, witness=False)
         if t.member:
             return t, cone_dim, False
     # (1) relaxation: exact emptiness certificate
@@ -500,13 +503,13 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
         return None, 0, True
     # (2) the interior samples again with the full redundancy search, then the generators
     for u in interior:
-        t = oracle.test(ms.Lambda_r_t @ u, screen=False)
+        t = oracle.test(ms.Lambda_r_t @ u, screen=False, witness=False)
         if t.member:
             return t, cone_dim, False
     members: list[Array] = []
     best: DirectionTest | None = None
     for u in positive:
-        t = oracle.test(ms.Lambda_r_t @ u, screen=False)
+        t = oracle.test(ms.Lambda_r_t @ u, screen=False, witness=False)
         if t.member:
             members.append(t.u)
             best = best or t
@@ -548,7 +551,7 @@ def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int 
     extra = gen_u.all_directions()
     if extra.size:
         U = np.vstack([U, extra])
-    tests = [oracle.test(ms.Lambda_r_t @ u) for u in U]
+    tests = [oracle.test(ms.Lambda_r_t @ u, witness=False) for u in U]
     member = np.array([t.member for t in tests])
     # boundary refinement
     if refine and member.any() and (~member).any() and a_bar >= 2:
@@ -571,7 +574,7 @@ def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int 
                 if np.linalg.norm(m) < 1e-12:
                     break
                 m /= np.linalg.norm(m)
-                t = oracle.test(ms.Lambda_r_t @ m)
+                t = oracle.test(ms.Lambda_r_t @ m, witness=False)
                 new.append(t)
                 if t.member == in_a:
                     a = m
