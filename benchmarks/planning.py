@@ -13,30 +13,18 @@ planning and certified collision checks), IK (CasADi), object-motion integration
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import statistics
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from machine import machine  # noqa: E402
 
 from analysis.scene import load_scene  # noqa: E402
 from planner import Goal, plan  # noqa: E402
-
-
-def machine() -> str:
-    cpu = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}; {os.cpu_count()} logical cores; {platform.system()} {platform.release()}; " \
-           f"python {platform.python_version()}"
 
 
 def run(name: str, target: float, repeat: int, time_limit: float | None) -> None:

@@ -61,6 +61,51 @@ class RedundancyResult:
     phi: float
 
 
+class _Constraints:
+    """``lbg <= g(x) <= ubg`` collected row block by row block."""
+
+    def __init__(self) -> None:
+        self.g: list[ca.SX] = []
+        self.lbg: list[float] = []
+        self.ubg: list[float] = []
+
+    def add(self, expr: ca.SX, lb: float, ub: float) -> None:
+        n = int(expr.shape[0])
+        self.g.append(expr)
+        self.lbg += [lb] * n
+        self.ubg += [ub] * n
+
+
+def _force_constraints(p: RedundancyNLP, cons: _Constraints, zc: ca.SX, f: ca.SX, d: int) -> ca.SX:
+    """Allowability, friction set, sliding S-points and the passive balance (rows of (30)) for the
+    motion ``zc`` and forces ``f``; returns the net wrench ``w`` (eq. 12 friction included)."""
+    if p.B.shape[0]:
+        cons.add(ca.DM(p.B) @ zc, -np.inf, 0.0)
+    cons.add(ca.DM(p.C) @ f, -np.inf, 0.0)
+    w = ca.DM(p.G_c) @ f + ca.DM(p.w_ex)
+    slip_all = ca.DM(p.P_s) @ zc
+    for k, col in enumerate(p.s_cols):
+        s = slip_all[k * d : (k + 1) * d]
+        nrm2 = ca.sumsqr(s)
+        cons.add(nrm2, p.slip_min**2, np.inf)
+        w = w - p.mu_s[k] * f[col] * (ca.DM(p.G_s_blocks[k]) @ (s / ca.sqrt(nrm2 + 1e-12)))
+    if p.Xi.shape[1]:
+        cons.add(ca.DM(p.Xi.T) @ w, 0.0, 0.0)
+    return w
+
+
+def _ipopt_options(max_iter: int) -> dict[str, Any]:
+    return {
+        "ipopt.print_level": 0,
+        "print_time": 0,
+        "ipopt.sb": "yes",
+        "ipopt.max_iter": max_iter,
+        "ipopt.tol": 1e-10,
+        "ipopt.constr_viol_tol": 1e-9,
+        "error_on_fail": False,
+    }
+
+
 def solve_redundancy(
     p: RedundancyNLP, zeta0: Array | None = None, f0: Array | None = None, max_iter: int = 300
 ) -> RedundancyResult:
@@ -76,50 +121,18 @@ def solve_redundancy(
     zc = ca.vertcat(ca.DM(p.u), z)
     dq = ca.DM(p.Lambda_q_t) @ ca.DM(p.u) + ca.DM(p.Lambda_qr_t) @ z
     obj = ca.sumsqr(dq)
-    g: list[ca.SX] = []
-    lbg: list[float] = []
-    ubg: list[float] = []
-    if p.B.shape[0]:
-        g.append(ca.DM(p.B) @ zc)
-        lbg += [-np.inf] * p.B.shape[0]
-        ubg += [0.0] * p.B.shape[0]
+    cons = _Constraints()
     if p.with_forces:
         f = x[nz:]
         obj = obj + 1e-6 * ca.sumsqr(f)
-        g.append(ca.DM(p.C) @ f)
-        lbg += [-np.inf] * p.C.shape[0]
-        ubg += [0.0] * p.C.shape[0]
-        w = ca.DM(p.G_c) @ f + ca.DM(p.w_ex)
-        slip_all = ca.DM(p.P_s) @ zc
-        for k, col in enumerate(p.s_cols):
-            s = slip_all[k * d : (k + 1) * d]
-            nrm2 = ca.sumsqr(s)
-            g.append(nrm2)
-            lbg.append(p.slip_min**2)
-            ubg.append(np.inf)
-            w = w - p.mu_s[k] * f[col] * (ca.DM(p.G_s_blocks[k]) @ (s / ca.sqrt(nrm2 + 1e-12)))
-        if p.Xi.shape[1]:
-            g.append(ca.DM(p.Xi.T) @ w)
-            lbg += [0.0] * p.Xi.shape[1]
-            ubg += [0.0] * p.Xi.shape[1]
-        wr = ca.DM(p.Lambda_r_t.T) @ w
+        wr = ca.DM(p.Lambda_r_t.T) @ _force_constraints(p, cons, zc, f, d)
         if a_bar > 1:
-            g.append(ca.DM(p.N_u.T) @ wr)
-            lbg += [0.0] * (a_bar - 1)
-            ubg += [0.0] * (a_bar - 1)
-        g.append(ca.DM(p.u).T @ wr)
-        lbg.append(p.w_min)
-        ubg.append(np.inf)
-    nlp = {"x": x, "f": obj, "g": ca.vertcat(*g) if g else ca.SX(0, 1)}
-    opts: dict[str, Any] = {
-        "ipopt.print_level": 0,
-        "print_time": 0,
-        "ipopt.sb": "yes",
-        "ipopt.max_iter": max_iter,
-        "ipopt.tol": 1e-10,
-        "ipopt.constr_viol_tol": 1e-9,
-        "error_on_fail": False,
-    }
+            cons.add(ca.DM(p.N_u.T) @ wr, 0.0, 0.0)
+        cons.add(ca.DM(p.u).T @ wr, p.w_min, np.inf)
+    elif p.B.shape[0]:
+        cons.add(ca.DM(p.B) @ zc, -np.inf, 0.0)
+    nlp = {"x": x, "f": obj, "g": ca.vertcat(*cons.g) if cons.g else ca.SX(0, 1)}
+    opts = _ipopt_options(max_iter)
     try:
         solver = ca.nlpsol("phi_min", "ipopt", nlp, opts)
         x0 = np.zeros(nz + nf)
@@ -127,7 +140,7 @@ def solve_redundancy(
             x0[:nz] = zeta0
         if p.with_forces:
             x0[nz:] = f0 if f0 is not None and np.all(np.isfinite(f0)) else 1.0
-        sol = solver(x0=x0, lbg=np.array(lbg), ubg=np.array(ubg))
+        sol = solver(x0=x0, lbg=np.array(cons.lbg), ubg=np.array(cons.ubg))
     except RuntimeError as e:
         raise SolverError("IPOPT", str(e)) from e
     status = str(solver.stats().get("return_status", "unknown"))
@@ -175,49 +188,17 @@ def solve_realisable_direction(
     zc = ca.vertcat(u, z)
     dq = ca.DM(p.Lambda_q_t) @ u + ca.DM(p.Lambda_qr_t) @ z
     obj = ca.sumsqr(dq) + 1e-6 * ca.sumsqr(f)
-    g: list[ca.SX] = [ca.sumsqr(u)]
-    lbg: list[float] = [1.0]
-    ubg: list[float] = [1.0]
-    if p.B.shape[0]:
-        g.append(ca.DM(p.B) @ zc)
-        lbg += [-np.inf] * p.B.shape[0]
-        ubg += [0.0] * p.B.shape[0]
-    g.append(ca.DM(p.C) @ f)
-    lbg += [-np.inf] * p.C.shape[0]
-    ubg += [0.0] * p.C.shape[0]
-    w = ca.DM(p.G_c) @ f + ca.DM(p.w_ex)
-    slip_all = ca.DM(p.P_s) @ zc
-    for k, col in enumerate(p.s_cols):
-        s = slip_all[k * d : (k + 1) * d]
-        nrm2 = ca.sumsqr(s)
-        g.append(nrm2)
-        lbg.append(p.slip_min**2)
-        ubg.append(np.inf)
-        w = w - p.mu_s[k] * f[col] * (ca.DM(p.G_s_blocks[k]) @ (s / ca.sqrt(nrm2 + 1e-12)))
-    if p.Xi.shape[1]:
-        g.append(ca.DM(p.Xi.T) @ w)
-        lbg += [0.0] * p.Xi.shape[1]
-        ubg += [0.0] * p.Xi.shape[1]
-    g.append(ca.DM(p.Lambda_r_t.T) @ w - lam * u)
-    lbg += [0.0] * a_bar
-    ubg += [0.0] * a_bar
-    g.append(lam)
-    lbg.append(p.w_min)
-    ubg.append(np.inf)
-    opts: dict[str, Any] = {
-        "ipopt.print_level": 0,
-        "print_time": 0,
-        "ipopt.sb": "yes",
-        "ipopt.max_iter": max_iter,
-        "ipopt.tol": 1e-10,
-        "ipopt.constr_viol_tol": 1e-9,
-        "error_on_fail": False,
-    }
+    cons = _Constraints()
+    cons.add(ca.sumsqr(u), 1.0, 1.0)
+    w = _force_constraints(p, cons, zc, f, d)
+    cons.add(ca.DM(p.Lambda_r_t.T) @ w - lam * u, 0.0, 0.0)
+    cons.add(lam, p.w_min, np.inf)
+    opts = _ipopt_options(max_iter)
     try:
-        solver = ca.nlpsol("realisable", "ipopt", {"x": x, "f": obj, "g": ca.vertcat(*g)}, opts)
+        solver = ca.nlpsol("realisable", "ipopt", {"x": x, "f": obj, "g": ca.vertcat(*cons.g)}, opts)
         wr0 = p.Lambda_r_t.T @ (p.G_c @ f0 + p.w_ex)
         x0 = np.concatenate([u0, zeta0, f0, [max(float(u0 @ wr0), p.w_min)]])
-        sol = solver(x0=x0, lbg=np.array(lbg), ubg=np.array(ubg))
+        sol = solver(x0=x0, lbg=np.array(cons.lbg), ubg=np.array(cons.ubg))
     except RuntimeError as e:
         raise SolverError("IPOPT", str(e)) from e
     status = str(solver.stats().get("return_status", "unknown"))
