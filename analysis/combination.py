@@ -21,7 +21,7 @@ from analysis.friction import FrictionSet, friction_set
 from analysis.motion import MotionSpace, motion_space
 from analysis.regrasp import RegraspCone, regrasp_cone
 from analysis.statics import Statics, statics
-from analysis.stationary import StationaryGrasp, stationary_grasp
+from analysis.stationary import StationaryGrasp, stationary_grasps
 from analysis.torques import FrictionUncertainty, TorqueSet, friction_uncertainty, torque_set
 
 
@@ -241,8 +241,9 @@ def analyze_combination(
     parts = CombinationParts.build(system, combination)
     sy, sel, ms, st, fs = parts.system, parts.sel, parts.ms, parts.st, parts.fs
     try:
-        grasp: StationaryGrasp | None = stationary_grasp(sy, sel, st, fs, "interior")
-        grasp_min: StationaryGrasp | None = stationary_grasp(sy, sel, st, fs, "min_grip")
+        pair = stationary_grasps(sy, sel, st, fs)
+        grasp: StationaryGrasp | None = pair[0]
+        grasp_min: StationaryGrasp | None = pair[1]
     except NoStationaryGrasp:
         grasp = grasp_min = None
     summary = summarize(parts, stationary_known=grasp is not None)

@@ -23,7 +23,7 @@ import numpy as np
 
 from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
-from analysis.exceptions import NoStationaryGrasp
+from analysis.exceptions import NoStationaryGrasp, SolverError
 from analysis.friction import FrictionSet
 from analysis.solvers.highs import solve_lp
 from analysis.statics import Statics
@@ -74,20 +74,21 @@ def min_total_normal(system: GraspSystem, st: Statics, fs: FrictionSet) -> tuple
     return float(res.objective), res.x
 
 
-def stationary_grasp(
-    system: GraspSystem, sel: Selection, st: Statics, fs: FrictionSet, kind: Kind = "interior"
-) -> StationaryGrasp:
-    """Solve eq. (18); raise :class:`NoStationaryGrasp` when the contacts cannot hold the object."""
+def _minimum(system: GraspSystem, sel: Selection, st: Statics, fs: FrictionSet) -> tuple[float, Array]:
     found = min_total_normal(system, st, fs)
     if found is None:
         raise NoStationaryGrasp(
             f"combination {sel.combination}: no contact forces in the friction set balance the external "
             "wrench (eq. 18 infeasible)"
         )
-    n_star, f_min = found
+    return found
+
+
+def _interior(system: GraspSystem, st: Statics, fs: FrictionSet, n_star: float, f_min: Array) -> StationaryGrasp:
+    """The most interior solution of (18), given the minimum grip ``(N*, f_min)``."""
     L_c = st.G_c.shape[1]
-    if kind == "min_grip" or L_c == 0:
-        return _make(kind, f_min, st, fs, 0.0)
+    if L_c == 0:
+        return _make("interior", f_min, st, fs, 0.0)
     Nr = _normal_rows(fs)
     budget = 2.0 * n_star if n_star > 1e-9 else 1.0
     # variables [f_c (L_c), s]: maximise s s.t. C f + s <= 0, -n_f + s <= 0, sum n_f <= budget
@@ -105,8 +106,6 @@ def stationary_grasp(
         np.r_[np.zeros(L_c), 1.0], A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=-system.w_ex, maximize=True
     )
     if res.status != "optimal":  # feasible (f_min, s = min margin) and bounded by the budget
-        from analysis.exceptions import SolverError
-
         raise SolverError("HiGHS", f"interior stationary grasp LP ended '{res.status}'")
     assert res.x is not None
     if res.x[-1] < 0.0:
@@ -114,6 +113,24 @@ def stationary_grasp(
         # near-singular G_c (its point violates the friction rows): keep the minimum grip
         return _make("interior", f_min, st, fs, 0.0)
     return _make("interior", res.x[:L_c], st, fs, float(res.x[-1]))
+
+
+def stationary_grasp(
+    system: GraspSystem, sel: Selection, st: Statics, fs: FrictionSet, kind: Kind = "interior"
+) -> StationaryGrasp:
+    """Solve eq. (18); raise :class:`NoStationaryGrasp` when the contacts cannot hold the object."""
+    n_star, f_min = _minimum(system, sel, st, fs)
+    if kind == "min_grip":
+        return _make("min_grip", f_min, st, fs, 0.0)
+    return _interior(system, st, fs, n_star, f_min)
+
+
+def stationary_grasps(
+    system: GraspSystem, sel: Selection, st: Statics, fs: FrictionSet
+) -> tuple[StationaryGrasp, StationaryGrasp]:
+    """Both members of (18), ``(interior, min_grip)``, from one minimum-grip LP."""
+    n_star, f_min = _minimum(system, sel, st, fs)
+    return _interior(system, st, fs, n_star, f_min), _make("min_grip", f_min, st, fs, 0.0)
 
 
 def _make(kind: Kind, f_c: Array, st: Statics, fs: FrictionSet, margin: float) -> StationaryGrasp:
