@@ -136,38 +136,69 @@ class GraspSystem:
         return self.mu > 0.0
 
 
+def system_from_arrays(
+    points: Array,
+    normals: Array,
+    p_o: Array,
+    J_blocks: Array | None = None,
+    mu: Array | float = 0.5,
+    w_ex: Array | None = None,
+    q: Array | None = None,
+    bodies: tuple[BodyRef, ...] | None = None,
+    friction_sides: int = 16,
+    contact_names: tuple[str, ...] = (),
+) -> GraspSystem:
+    """A :class:`GraspSystem` from contact points ``(L, d)``, normals ``(L, d)`` (normalised here)
+    and point Jacobians ``(L, d, M)`` (default: contacts on fixed bodies, ``M = 0``); builds the
+    tangent bases and ``G_ij`` (eq. 1)."""
+    points = np.asarray(points, dtype=float)
+    L, d = points.shape
+    D = 3 if d == 2 else 6
+    normals = np.asarray(normals, dtype=float).reshape(L, d)
+    normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
+    p_o = np.asarray(p_o, dtype=float)
+    J_blocks = np.zeros((L, d, 0)) if J_blocks is None else np.asarray(J_blocks, dtype=float)
+    return GraspSystem(
+        dim=d,
+        q=np.zeros(J_blocks.shape[2]) if q is None else np.asarray(q, dtype=float),
+        p_o=p_o,
+        w_ex=np.zeros(D) if w_ex is None else np.asarray(w_ex, dtype=float),
+        points=points,
+        normals=normals,
+        tangents=np.array([tangent_basis(n) for n in normals]).reshape(L, d - 1, d),
+        mu=np.broadcast_to(np.asarray(mu, dtype=float), (L,)).copy(),
+        bodies=tuple(BodyRef("b") for _ in range(L)) if bodies is None else bodies,
+        J_blocks=J_blocks,
+        G_blocks=np.array([grasp_block(p, p_o) for p in points]).reshape(L, D, d),
+        friction_sides=friction_sides,
+        contact_names=contact_names,
+    )
+
+
 def build_system(scene: Scene, hand: HandKinematics | None = None, q: Array | None = None) -> GraspSystem:
     """Evaluate the contact kinematics of a scene at its configuration (or at ``q``)."""
     hand = hand or HandKinematics.from_scene(scene)
     q = hand.q0 if q is None else np.asarray(q, dtype=float)
     d = scene.dim
-    p_o = object_origin(scene)
     L = len(scene.contacts)
     points = np.array([c.point for c in scene.contacts], dtype=float).reshape(L, d)
-    normals = np.array([c.normal for c in scene.contacts], dtype=float).reshape(L, d)
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     bodies = []
     J_blocks = np.zeros((L, d, hand.M))
-    G_blocks = np.zeros((L, scene.D, d))
     for i, c in enumerate(scene.contacts):
         ref = hand.resolve_body(c.body)
         if ref is None:  # validated by Scene already
             raise CombinationError(("contacts", i, "body"), f"unknown body '{c.body}'")
         bodies.append(ref)
         J_blocks[i] = hand.point_jacobian(ref, points[i], q)
-        G_blocks[i] = grasp_block(points[i], p_o)
-    return GraspSystem(
-        dim=d,
-        q=q,
-        p_o=p_o,
-        w_ex=np.asarray(scene.external_wrench, dtype=float),
-        points=points,
-        normals=normals,
-        tangents=np.array([tangent_basis(n) for n in normals]).reshape(L, d - 1, d),
+    return system_from_arrays(
+        points,
+        np.array([c.normal for c in scene.contacts], dtype=float),
+        object_origin(scene),
+        J_blocks,
         mu=np.array([c.mu for c in scene.contacts], dtype=float),
+        w_ex=np.asarray(scene.external_wrench, dtype=float),
+        q=q,
         bodies=tuple(bodies),
-        J_blocks=J_blocks,
-        G_blocks=G_blocks,
         friction_sides=scene.friction_cone_sides,
         contact_names=tuple(c.body for c in scene.contacts),
     )

@@ -28,8 +28,7 @@ from numpy.typing import NDArray
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from analysis.contacts import GraspSystem, build_system, grasp_block, tangent_basis  # noqa: E402
-from analysis.kinematics import BodyRef  # noqa: E402
+from analysis.contacts import GraspSystem, build_system, system_from_arrays  # noqa: E402
 from analysis.modes import ModeEnumeration, enumerate_modes  # noqa: E402
 from analysis.scene import load_scene  # noqa: E402
 
@@ -38,24 +37,7 @@ EXAMPLES = ROOT / "examples"
 
 
 def system_from(points: Array, normals: Array, p_o: Array, J_blocks: Array) -> GraspSystem:
-    points = np.asarray(points, dtype=float)
-    L, d = points.shape
-    D = 3 if d == 2 else 6
-    normals = np.asarray(normals, dtype=float)
-    normals = normals / np.linalg.norm(normals, axis=1, keepdims=True)
-    return GraspSystem(
-        dim=d,
-        q=np.zeros(J_blocks.shape[2]),
-        p_o=np.asarray(p_o, dtype=float),
-        w_ex=np.zeros(D),
-        points=points,
-        normals=normals,
-        tangents=np.array([tangent_basis(n) for n in normals]).reshape(L, d - 1, d),
-        mu=np.full(L, 0.5),
-        bodies=tuple(BodyRef("b") for _ in range(L)),
-        J_blocks=J_blocks,
-        G_blocks=np.array([grasp_block(p, p_o) for p in points]).reshape(L, D, d),
-    )
+    return system_from_arrays(points, normals, p_o, J_blocks)
 
 
 def box_on_table_2d(L: int) -> GraspSystem:

@@ -17,9 +17,8 @@ import numpy as np
 import pytest
 from numpy.typing import ArrayLike, NDArray
 
-from analysis.contacts import GraspSystem, build_system, grasp_block, tangent_basis
+from analysis.contacts import GraspSystem, build_system, system_from_arrays
 from analysis.exceptions import CombinationError
-from analysis.kinematics import BodyRef
 from analysis.modes import ModeTolerances, combination_admissible, enumerate_modes
 from analysis.scene import load_scene, scene_from_dict
 
@@ -42,28 +41,8 @@ def make_system(
     points: ArrayLike, normals: ArrayLike, p_o: ArrayLike, J_blocks: Array | None = None
 ) -> GraspSystem:
     """A ``GraspSystem`` built directly: contacts on fixed bodies unless ``J_blocks`` is given."""
-    pts = np.asarray(points, dtype=float)
-    nrm = np.asarray(normals, dtype=float)
-    nrm = nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
-    o = np.asarray(p_o, dtype=float)
-    L, d = pts.shape
-    D = 3 if d == 2 else 6
-    if J_blocks is None:
-        J_blocks = np.zeros((L, d, 0))
-    M = J_blocks.shape[2]
-    return GraspSystem(
-        dim=d,
-        q=np.zeros(M),
-        p_o=o,
-        w_ex=np.zeros(D),
-        points=pts,
-        normals=nrm,
-        tangents=np.array([tangent_basis(n) for n in nrm]).reshape(L, d - 1, d),
-        mu=np.full(L, 0.5),
-        bodies=tuple(BodyRef("b") for _ in range(L)),
-        J_blocks=np.asarray(J_blocks, dtype=float),
-        G_blocks=np.array([grasp_block(p, o) for p in pts]).reshape(L, D, d),
-    )
+    return system_from_arrays(np.asarray(points, dtype=float), np.asarray(normals, dtype=float),
+                              np.asarray(p_o, dtype=float), J_blocks)
 
 
 def table_scene_2d(shape: dict, position: list[float], xs: list[float]) -> GraspSystem:
