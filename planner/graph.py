@@ -14,7 +14,9 @@ Every edge is a :class:`Transition` checked by the closure analysis:
 * ``object_motion`` (eq. 30-32): with the contacts of a set ``S_D`` in state D and the others F,
   the combination is feasible (18 and 22), the direction is a DAFC member, the torque set T (32)
   is not empty; its recommended torque and the motion ``dzeta_c`` chosen by (31) move the object
-  until the D-contacts have separated by ``clearance``, integrated on ``A_c [dq; dr] = 0``.
+  until the D-contacts have separated by ``clearance``; the path of hand and object on the contact
+  manifold ``A_c [dq; dr] = 0`` is planned by OMPL's constrained planning
+  (:func:`planner.ompl_paths.plan_object_motion`).
 
 Costs: joint-path length + object-path length / object size + ``effort_weight`` * |tau|.
 """
@@ -44,6 +46,7 @@ from planner.ompl_paths import (
     joint_limits,
     keep_contacts,
     path_clearance_certified,
+    plan_object_motion,
     plan_transfer,
     project_contacts,
 )
@@ -532,10 +535,18 @@ class ContactStateGraph:
                 dist = float(np.linalg.norm(np.asarray(self.goal.pose) - state.pose_vector()))
             keep = [i for i in range(L) if i not in dset]
             t0 = time.perf_counter()
-            om = integrate_object_motion(self.model, state, ts.direction, ts.dq, keep, list(dset), dist)
+            straight = integrate_object_motion(self.model, state, ts.direction, ts.dq, keep, list(dset), dist,
+                                               check_path=False)
             self.timing["motion"] += time.perf_counter() - t0
+            if straight is None:
+                self._reject("object motion leaves the contact manifold or its end collides")
+                continue
+            t0 = time.perf_counter()
+            om = plan_object_motion(self.model, state, straight, keep, list(dset), seed=self.options.seed,
+                                    time_limit=self.options.ompl_time)
+            self.timing["ompl"] += time.perf_counter() - t0
             if om is None:
-                self._reject("object motion leaves the contact manifold or collides")
+                self._reject("OMPL found no collision-free object motion on the contact manifold")
                 continue
             end = GraspState(state.contacts, om.q_path[-1], state.position, state.rotation, state.dim)
             final = _pose_state(end, om.pose_path[-1])
@@ -552,7 +563,9 @@ class ContactStateGraph:
                  "dim_force_polyhedron": ts.dim_P, "work": ts.work, "nlp_status": ts.nlp_status},
                 {"equation": "30-32", "dafc_dim": summ.dim_dafc, "a_bar": summ.a_bar,
                  "separation_rates": rates.tolist(), "separations": om.separations.tolist(),
-                 "object_path_length": om.length, "manifold_residual": om.max_residual},
+                 "object_path_length": om.length, "manifold_residual": om.max_residual,
+                 "ompl_planner_states": om.planner_states, "states_checked": om.states_checked,
+                 "max_joint_step": om.max_joint_step, "ompl_seconds": om.ompl_seconds},
                 cost,
             )
             out.append((t, new))

@@ -34,18 +34,23 @@
   (every configuration, not only samples, is collision-free: the clearance at a sample bounds
   how far the joints may move before a capsule can touch), falling back to 1 mm steps where the
   clearance is tiny.
-* **Object motion** (eq. 30-32) on ``A_c [dq; dr] = 0``: the motion is prescribed (the DAFC
-  direction and the finger motion ``dq`` chosen by (31)), so it is integrated in small steps and
-  each step projected back onto the contact manifold (Gauss-Newton on ``q`` for the F-points:
-  the body point coincides with the object point). This is the projection OMPL's
-  ``ProjectedStateSpace`` performs; a constrained *planner* (a search between two given
-  states) has nothing to search here, because the direction and both ends are fixed by the
-  analysis.
+* **Object motion** (eq. 30-32) on ``A_c [dq; dr] = 0``: the analysis fixes the start, the
+  direction (a DAFC member) and the finger motion ``dq`` chosen by (31);
+  :func:`integrate_object_motion` follows them in small steps, each projected back onto the
+  contact manifold (Gauss-Newton on ``q``: each F-point's body point coincides with its object
+  point), which gives the end configuration (the D-contacts separated by the planned clearance).
+  :func:`plan_object_motion` then plans the path between the two ends with OMPL's constrained
+  planning: a ``ProjectedStateSpace`` over ``x = [q; s]`` (hand configuration and object
+  displacement) with the constraint :class:`ContactManifold` (the F-points stay together, exactly,
+  not only to first order), ``RRTConnect`` whose motions are manifold geodesics checked for joint
+  limits and collisions, and the solution densified on the manifold until no joint moves more than
+  :data:`DENSE_STEP` between checked states, each of which is checked again.
 """
 
 from __future__ import annotations
 
 import functools
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -840,10 +845,12 @@ def integrate_object_motion(
     separating: Sequence[int],
     distance: float,
     steps: int = 20,
+    check_path: bool = True,
 ) -> ObjectMotion | None:
     """Move the object by ``distance`` along ``dr`` with the fingers along ``dq``, projecting on
     the sticking contacts after every step; ``None`` if a link would penetrate the object or a
-    separating contact would not separate."""
+    separating contact would not separate. With ``check_path = False`` only the end configuration
+    is checked for collisions (the path is then planned by :func:`plan_object_motion`)."""
     hand = model.hand
     h = distance / steps
     cur = state
@@ -862,6 +869,8 @@ def integrate_object_motion(
         cur = GraspState(cur.contacts, q, cur.position, cur.rotation, cur.dim)
         qs.append(q.copy())
         poses.append(cur.pose_vector())
+        if not check_path and len(qs) <= steps:
+            continue
         for f in range(len(hand.fingers)):
             touching = [b for b in busy if b is not None and b.finger == f]
             qf = q[hand.finger_slice(f)]
@@ -889,3 +898,258 @@ def keep_contacts(state: GraspState, keep: Sequence[int], q: Array, pose: GraspS
     """The state after a motion: only the contacts ``keep``, configuration ``q``, pose of ``pose``."""
     contacts: tuple[GraspContact, ...] = tuple(state.contacts[i] for i in keep)
     return GraspState(contacts, np.asarray(q, float), pose.position, pose.rotation, state.dim)
+
+
+# --------------------------------------------------------------------------------------------
+# Object motion: OMPL constrained planning on the contact manifold
+
+
+def _left_jacobian_so3(w: Array) -> Array:
+    """``J_l(w)`` ``(3, 3)`` of SO(3): ``exp(w + dw) = exp(J_l(w) dw) exp(w)`` to first order."""
+    th = float(np.linalg.norm(w))
+    W = skew(w)
+    if th < 1e-6:
+        return _EYE3 + 0.5 * W + (W @ W) / 6.0
+    return _EYE3 + (1 - np.cos(th)) / th**2 * W + (th - np.sin(th)) / th**3 * (W @ W)
+
+
+class ContactManifold:
+    """The contact manifold of a grasp state's sticking contacts, in the ambient coordinates
+    ``x = [q (M); s (D)]`` of OMPL's constrained planning: ``q`` the hand configuration and ``s``
+    the object displacement from the state's pose (2-D ``(dx, dy, dtheta)``; 3-D ``(dp, w)``, the
+    object at ``p_o + dp`` with rotation ``exp(w) R_0``).
+
+    ``F(x)`` ``(d * n,)`` stacks, for every sticking contact ``i``, the body point minus the object
+    point, ``x_b,i(q) - (p_o + dp + R(s) c_i)``, which is zero on the manifold (the F-points of
+    eq. 7 do not move relative to each other); its Jacobian is ``[J_c, -G^T]`` with the object part
+    in these coordinates, so ``F'(x) [dq; ds] = 0`` at ``s = 0`` is ``A_c [dq; dr] = 0`` restricted
+    to the F-points (eq. 7, 19)."""
+
+    def __init__(self, hand: HandKinematics, state: GraspState, sticking: Sequence[int]):
+        self.hand, self.state, self.dim = hand, state, state.dim
+        self.M, self.D = hand.M, 3 if state.dim == 2 else 6
+        self.items: list[tuple[BodyRef | None, Array, Array]] = []  # (finger body or None, point_body, point_obj)
+        for i in sticking:
+            c = state.contacts[i]
+            ref = hand.resolve_body(c.body)
+            assert ref is not None
+            if ref.finger is None:  # a fixed body: its (world) point stays where it is
+                self.items.append((None, state.world_point(i), np.asarray(c.point_object, float)))
+            else:
+                self.items.append((ref, np.asarray(c.point_body, float), np.asarray(c.point_object, float)))
+        self.rows = self.dim * len(self.items)
+
+    def pose(self, s: Array) -> tuple[Array, Array]:
+        """Object position ``(d,)`` and rotation ``(3, 3)`` at displacement ``s``."""
+        d = self.dim
+        if d == 2:
+            from analysis.rotations import rotz
+
+            return self.state.position + s[:2], rotz(float(s[2])) @ self.state.rotation
+        return self.state.position + s[:3], rotvec_to_matrix(s[3:]) @ self.state.rotation
+
+    def function(self, x: Array) -> Array:
+        q, s = x[: self.M], x[self.M:]
+        pos, R = self.pose(s)
+        d = self.dim
+        out = np.empty(self.rows)
+        for k, (ref, pb, po) in enumerate(self.items):
+            xb = pb[:d] if ref is None else self.hand.point_position(ref, pb, q)
+            out[d * k: d * k + d] = xb - (pos + (R[:d, :d] @ po))
+        return out
+
+    def jacobian(self, x: Array) -> Array:
+        q, s = x[: self.M], x[self.M:]
+        _, R = self.pose(s)
+        d = self.dim
+        J = np.zeros((self.rows, self.M + self.D))  # (d n, M + D)
+        for k, (ref, pb, po) in enumerate(self.items):
+            r = slice(d * k, d * k + d)
+            if ref is not None:
+                J[r, : self.M] = self.hand.point_jacobian(ref, self.hand.point_position(ref, pb, q), q)
+            J[r, self.M: self.M + d] = -np.eye(d)
+            y = R[:d, :d] @ po  # object point relative to p_o, world frame
+            if d == 2:
+                J[r, self.M + 2] = -np.array([-y[1], y[0]])
+            else:
+                J[r, self.M + 3:] = skew(y) @ _left_jacobian_so3(s[3:])
+        return J
+
+
+@dataclass(frozen=True)
+class ConstrainedObjectMotion:
+    """An object motion planned by OMPL on the contact manifold (:func:`plan_object_motion`)."""
+
+    q_path: Array  # (n, M) hand configurations
+    pose_path: Array  # (n, D) object pose vectors
+    displacement_path: Array  # (n, D) the ambient object coordinates s of ContactManifold
+    separations: Array  # (#D,) final gap of each separating contact
+    length: float  # object path length (pose-vector norm)
+    max_residual: float  # largest |F(x)| over the dense path
+    max_joint_step: float  # largest joint-space step between consecutive checked states
+    states_checked: int
+    planner_states: int  # states of the solution path before densification
+    ompl_seconds: float
+
+
+def plan_object_motion(
+    model: CollisionModel,
+    state: GraspState,
+    goal: ObjectMotion,
+    sticking: Sequence[int],
+    separating: Sequence[int],
+    seed: int = 0,
+    time_limit: float = 1.0,
+    tolerance: float = 1e-8,
+) -> ConstrainedObjectMotion | None:
+    """Plan the motion of hand and object from ``state`` to the end of ``goal`` (the configuration
+    reached along the DAFC direction, :func:`integrate_object_motion`) with OMPL's constrained
+    planning: a ``ProjectedStateSpace`` over ``[q; s]`` with the constraint
+    :class:`ContactManifold` of the sticking contacts (``A_c [dq; dr] = 0``, eq. 7 and 19, to
+    every order), ``RRTConnect`` (seeded) whose motions are geodesics of the manifold, a validity
+    checker for joint limits and collisions (:meth:`CollisionModel.finger_clearance`; the contact
+    links may touch the object, overlaps present at the start may not deepen), and the solution
+    densified on the manifold until no joint moves more than :data:`DENSE_STEP` between two
+    checked states, every one of which is re-checked (constraint residual below
+    ``100 * tolerance`` and collision-free). ``None`` if OMPL finds no path or the check fails."""
+    import time
+
+    from ompl import base as ob
+    from ompl import geometric as og
+    from ompl import util as ou
+
+    hand = model.hand
+    man = ContactManifold(hand, state, sticking)
+    M, D = man.M, man.D
+    n = M + D
+    q0, q1 = state.q, goal.q_path[-1]
+    s1 = _displacement(state, goal.pose_path[-1])
+    x0, x1 = np.concatenate([q0, np.zeros(D)]), np.concatenate([q1, s1])
+    busy = [hand.resolve_body(state.contacts[i].body) for i in (*sticking, *separating)]
+    allow = [model.start_allowance(f, state.q, state.position, state.rotation) for f in range(len(hand.fingers))]
+    limits = [joint_limits(hand, f) for f in range(len(hand.fingers))]
+    touching = [[b for b in busy if b is not None and b.finger == f] for f in range(len(hand.fingers))]
+
+    def valid(x: Array) -> bool:
+        q = x[:M]
+        pos, R = man.pose(x[M:])
+        for f in range(len(hand.fingers)):
+            qf = q[hand.finger_slice(f)]
+            if np.any(qf < limits[f][0] - 1e-9) or np.any(qf > limits[f][1] + 1e-9):
+                return False
+            if model.finger_clearance(f, q, pos, R, touching[f], allow[f]) < -1e-9:
+                return False
+        return True
+
+    if man.rows == 0 or not valid(x0) or not valid(x1):
+        return None
+    if float(np.linalg.norm(man.function(x1))) > 100 * tolerance:
+        return None
+
+    class _Constraint(ob.Constraint):
+        def __init__(self) -> None:
+            super().__init__(n, man.rows)
+
+        def function(self, x: Any, out: Any) -> None:
+            out[:] = man.function(np.asarray(x))
+
+        def jacobian(self, x: Any, out: Any) -> None:
+            out[:, :] = man.jacobian(np.asarray(x))
+
+    ou.setLogLevel(ou.LOG_NONE)
+    ou.RNG.setSeed(int(seed) + 1)
+    constraint = _Constraint()
+    constraint.setTolerance(tolerance)
+    constraint.setMaxIterations(100)
+    rank = int(np.linalg.matrix_rank(man.jacobian(x0), tol=1e-9))
+    constraint.setManifoldDimension(n - rank)
+    span = np.abs(x1 - x0)
+    margin = np.maximum(span, 1e-3)
+    lo, hi = np.minimum(x0, x1) - margin, np.maximum(x0, x1) + margin
+    for f in range(len(hand.fingers)):  # joint limits bound the ambient box too
+        sl = hand.finger_slice(f)
+        lo[sl] = np.maximum(lo[sl], np.minimum(limits[f][0], np.minimum(x0[sl], x1[sl])))
+        hi[sl] = np.minimum(hi[sl], np.maximum(limits[f][1], np.maximum(x0[sl], x1[sl])))
+    ambient = ob.RealVectorStateSpace(n)
+    bounds = ob.RealVectorBounds(n)
+    for j in range(n):
+        bounds.setLow(j, float(lo[j]))
+        bounds.setHigh(j, float(hi[j]))
+    ambient.setBounds(bounds)
+    space = ob.ProjectedStateSpace(ambient, constraint)
+    si = ob.ConstrainedSpaceInformation(space)
+    total = float(np.linalg.norm(x1 - x0))
+    space.setDelta(max(total / 20.0, 1e-6))  # geodesic step: at least 20 checked states per motion
+
+    def read(st: Any) -> Array:
+        return np.array([space.getValueAddressAtIndex(st, j) for j in range(n)])
+
+    ss = og.SimpleSetup(si)
+    ss.setStateValidityChecker(lambda st: valid(read(st)))
+    a, b = space.allocState(), space.allocState()
+    a.copy([float(v) for v in x0])
+    b.copy([float(v) for v in x1])
+    ss.setStartAndGoalStates(a, b, 1e-9)
+    planner = og.RRTConnect(si)
+    planner.setRange(max(total, 1e-6))  # try the direct geodesic first
+    ss.setPlanner(planner)
+    t0 = time.perf_counter()
+    status = ss.solve(time_limit)
+    if not bool(status) or not ss.haveExactSolutionPath():
+        return None
+    path = ss.getSolutionPath()
+    planner_states = int(path.getStateCount())
+    X = np.array([read(path.getState(i)) for i in range(path.getStateCount())])  # (k, n)
+    X = _densify(man, X, DENSE_STEP, tolerance)
+    dt = time.perf_counter() - t0
+    step = float(np.max(np.abs(np.diff(X[:, :M], axis=0)))) if len(X) > 1 else 0.0
+    residual = max(float(np.linalg.norm(man.function(x))) for x in X)
+    if step > DENSE_STEP or residual > 100 * tolerance or not all(valid(x) for x in X):
+        return None
+    if float(np.max(np.abs(X[-1] - x1))) > 1e-6:
+        return None
+    poses = np.array([_pose_vector(man, x[M:]) for x in X])  # (k, D)
+    length = float(np.sum(np.linalg.norm(np.diff(poses, axis=0), axis=1)))
+    return ConstrainedObjectMotion(X[:, :M], poses, X[:, M:], goal.separations, length, residual, step, len(X),
+                                   planner_states, dt)
+
+
+def _densify(man: ContactManifold, X: Array, max_step: float, tolerance: float) -> Array:
+    """Insert states between consecutive states of ``X`` ``(k, M + D)`` so that no joint moves more
+    than ``max_step``: points of the ambient segment projected back onto the manifold (Newton steps
+    with the pseudo-inverse of ``F'``, as OMPL's projection does)."""
+    M = man.M
+    out = [X[0]]
+    for a, b in itertools.pairwise(X):
+        k = int(np.ceil(float(np.max(np.abs(b[:M] - a[:M]))) / max_step * 1.02))
+        for t in np.arange(1, k) / max(k, 1):
+            x = a + t * (b - a)
+            for _ in range(50):
+                F = man.function(x)
+                if float(np.linalg.norm(F)) <= tolerance:
+                    break
+                x = x - np.linalg.lstsq(man.jacobian(x), F, rcond=None)[0]
+            out.append(x)
+        out.append(b)
+    return np.array(out)
+
+
+def _displacement(state: GraspState, pose: Array) -> Array:
+    """The ambient object coordinates ``s`` of :class:`ContactManifold` of a pose vector."""
+    from analysis.rotations import matrix_to_rotvec
+
+    d = state.dim
+    if d == 2:
+        theta0 = float(np.arctan2(state.rotation[1, 0], state.rotation[0, 0]))
+        return np.array([pose[0] - state.position[0], pose[1] - state.position[1], pose[2] - theta0])
+    R = rotvec_to_matrix(np.asarray(pose[3:], float))
+    return np.concatenate([np.asarray(pose[:3], float) - state.position, matrix_to_rotvec(R @ state.rotation.T)])
+
+
+def _pose_vector(man: ContactManifold, s: Array) -> Array:
+    from analysis.rotations import matrix_to_rotvec
+
+    pos, R = man.pose(s)
+    if man.dim == 2:
+        return np.array([*pos, float(np.arctan2(R[1, 0], R[0, 0]))])
+    return np.concatenate([pos, matrix_to_rotvec(R)])

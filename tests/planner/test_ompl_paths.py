@@ -129,3 +129,114 @@ def test_object_motion_stays_on_the_contact_manifold(planar_scene: Scene, planar
             np.testing.assert_allclose(hand.point_position(ref, c.point_body, q), st.world_point(i), atol=1e-6)
     assert np.all(np.asarray(t.figures["separations"]) > 0)
     assert t.object_path[-1][1] > t.object_path[0][1]  # lifted off the palm
+
+
+def _motion_step(plan):  # type: ignore[no-untyped-def]
+    step = next(s for s in plan.steps if s.transition.kind == "object_motion")
+    t = step.transition
+    sticking = [i for i, ch in enumerate(t.combination) if ch == "F"]
+    separating = [i for i, ch in enumerate(t.combination) if ch == "D"]
+    return step, sticking, separating
+
+
+def test_contact_manifold_jacobian_and_tangent_space(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
+    """F'(x) equals central finite differences away from the start, F(x0) = 0, and at the start
+    the tangent space null(F'(x0)) is the paper's motion space null(A_c) = span(Lambda) (eq. 7)."""
+    from planner.ompl_paths import ContactManifold
+    from planner.state import StateAnalysis
+
+    hand = HandKinematics.from_scene(planar_scene)
+    step, sticking, _ = _motion_step(planar_plan)
+    before = step.before
+    man = ContactManifold(hand, before, sticking)
+    x0 = np.concatenate([before.q, np.zeros(man.D)])
+    assert float(np.linalg.norm(man.function(x0))) < 1e-12
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        x = x0 + 0.05 * rng.standard_normal(len(x0))
+        J = man.jacobian(x)  # (d n, M + D)
+        Jn = np.column_stack([(man.function(x + e) - man.function(x - e)) / 2e-6
+                              for e in 1e-6 * np.eye(len(x))])
+        np.testing.assert_allclose(J, Jn, atol=1e-7)
+    from scipy.linalg import null_space
+
+    N = null_space(man.jacobian(x0))
+    Lam = StateAnalysis.of(planar_scene, before, hand).parts(step.transition.combination).ms.Lambda
+    assert N.shape[1] == Lam.shape[1]
+    np.testing.assert_allclose(N @ N.T, Lam @ Lam.T, atol=1e-9)
+
+
+def test_spatial_manifold_jacobian_matches_finite_differences() -> None:
+    """The 3-D rotation part: d(exp(w) y)/dw = -[exp(w) y]x J_l(w), at random w."""
+    from conftest import EXAMPLES
+
+    from analysis.scene import load_scene
+    from planner.ompl_paths import ContactManifold
+
+    scene = load_scene(EXAMPLES / "sphere_four_finger_palm.json")
+    hand = HandKinematics.from_scene(scene)
+    st = state_from_scene(scene, hand)
+    man = ContactManifold(hand, st, list(range(st.L)))
+    rng = np.random.default_rng(4)
+    x0 = np.concatenate([st.q, np.zeros(man.D)])
+    assert float(np.linalg.norm(man.function(x0))) < 1e-9
+    for scale in (1e-3, 0.3, 1.5):
+        x = x0 + scale * rng.standard_normal(len(x0))
+        Jn = np.column_stack([(man.function(x + e) - man.function(x - e)) / 2e-7
+                              for e in 1e-7 * np.eye(len(x))])
+        np.testing.assert_allclose(man.jacobian(x), Jn, atol=1e-6)
+
+
+def test_ompl_object_motion_is_on_the_manifold_and_collision_free(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
+    """The lift planned by OMPL's constrained planning: ends where the analysis says, every state
+    on the manifold, joint steps at most DENSE_STEP, and every state collision-free when checked
+    independently."""
+    from planner.ompl_paths import integrate_object_motion, plan_object_motion
+
+    hand = HandKinematics.from_scene(planar_scene)
+    model = CollisionModel.of(planar_scene, hand)
+    step, sticking, separating = _motion_step(planar_plan)
+    t, before = step.transition, step.before
+    assert t.figures["ompl_planner_states"] >= 2 and t.figures["manifold_residual"] < 1e-6
+    assert np.max(np.abs(np.diff(t.q_path, axis=0))) <= DENSE_STEP + 1e-12
+    straight = integrate_object_motion(model, before, np.asarray(t.torque_set["direction"]),
+                                       np.asarray(t.torque_set["dq"]), sticking, separating,
+                                       float(np.linalg.norm(t.object_path[-1] - t.object_path[0])), check_path=False)
+    assert straight is not None
+    om = plan_object_motion(model, before, straight, sticking, separating)
+    assert om is not None
+    np.testing.assert_allclose(om.q_path[0], before.q, atol=1e-12)
+    np.testing.assert_allclose(om.q_path[-1], straight.q_path[-1], atol=1e-9)
+    np.testing.assert_allclose(om.pose_path[-1], straight.pose_path[-1], atol=1e-9)
+    assert om.max_joint_step <= DENSE_STEP and om.max_residual < 1e-6
+    from planner.ompl_paths import moved
+
+    touching = [hand.resolve_body(before.contacts[i].body) for i in (*sticking, *separating)]
+    allow = [model.start_allowance(f, before.q, before.position, before.rotation) for f in range(len(hand.fingers))]
+    for q, pose in zip(om.q_path, om.pose_path, strict=True):
+        st = moved(before, pose - before.pose_vector())
+        for f in range(len(hand.fingers)):
+            mine = [b for b in touching if b is not None and b.finger == f]
+            assert model.finger_clearance(f, q, st.position, st.rotation, mine, allow[f]) >= -1e-9
+
+
+def test_ompl_object_motion_refuses_a_colliding_goal(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
+    """A goal configuration with a link through the object has no valid path: None, not a path."""
+    from planner.ompl_paths import ObjectMotion, plan_object_motion
+
+    hand = HandKinematics.from_scene(planar_scene)
+    model = CollisionModel.of(planar_scene, hand)
+    step, sticking, separating = _motion_step(planar_plan)
+    before = step.before
+    f0 = 0  # finger 0 lets go (its contacts leave the manifold) and ends with link 0 through the disk
+    keep = [i for i in sticking if (r := hand.resolve_body(before.contacts[i].body)) is None or r.finger != f0]
+    assert 0 < len(keep) < len(sticking)
+    q_bad = before.q.copy()
+    q_bad[hand.finger_slice(f0)] = [1.0, 0.0]
+    goal = ObjectMotion(np.array([before.q, q_bad]), np.array([before.pose_vector()] * 2), np.ones(len(separating)),
+                        0.0, 0.0)
+    assert model.finger_clearance(f0, q_bad, before.position, before.rotation) < 0.0
+    assert plan_object_motion(model, before, goal, keep, separating) is None
+    q_ok = before.q.copy()  # the same motion without the collision is planned
+    goal_ok = ObjectMotion(np.array([before.q, q_ok]), goal.pose_path, goal.separations, 0.0, 0.0)
+    assert plan_object_motion(model, before, goal_ok, keep, separating) is not None
