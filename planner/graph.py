@@ -41,6 +41,7 @@ from analysis.torques import torque_set
 from planner.goals import Goal
 from planner.ompl_paths import (
     CollisionModel,
+    ContactManifold,
     fingertip_ik,
     integrate_object_motion,
     joint_limits,
@@ -86,6 +87,14 @@ class PlannerOptions:
     #: object motions may also separate single finger contacts (more edges, slower); by default
     #: they separate the contacts on fixed bodies (the palm lets go, Fig. 5 (3) -> (4))
     separate_finger_contacts: bool = False
+    #: object motions in which the contacts on fixed bodies slide (S, eq. 5, 11-12) while the
+    #: fingers stick: ``None`` for pose goals only (where the object must get somewhere), or
+    #: always / never. Followed for disk and sphere objects (the sliding contact keeps touching).
+    sliding_motions: bool | None = None
+    #: longest object motion towards a goal pose, and length of a sliding motion (object sizes):
+    #: the torque of T is chosen for the start of the motion (first order), so a longer way is
+    #: taken in several motions, each re-analysed
+    motion_step: float = 0.03
     #: A* heuristic for the ``active`` goal: ``heuristic_weight`` per fingertip contact still
     #: missing (2 in 2-D, 3 in 3-D: the fewest point contacts with friction that can give active
     #: closure) plus one if a fixed body still touches; for the ``fingertips`` goal,
@@ -495,8 +504,13 @@ class ContactStateGraph:
             subsets = [fixed] if fixed and len(fixed) < L else []
         if self.goal.type == "pose":
             subsets.append(())
-        for dset in subsets:
-            comb = "".join("D" if i in dset else ("F" if c.mu > 0 else "N") for i, c in enumerate(state.contacts))
+        plans: list[tuple[tuple[int, ...], tuple[int, ...]]] = [(dset, ()) for dset in subsets]  # (D-set, S-set)
+        slide = self.options.sliding_motions
+        if (self.goal.type == "pose" if slide is None else slide) and fixed and len(fixed) < L \
+                and isinstance(self.scene.object.shape, Disk | Sphere):
+            plans.append(((), fixed))
+        for dset, sset in plans:
+            comb = _letters(state, dset, sset)
             t0 = time.perf_counter()
             summ = sa.summary(comb)
             if not summ.feasible:
@@ -525,32 +539,37 @@ class ContactStateGraph:
                 break
             self.timing["analysis"] += time.perf_counter() - t0
             if best is None:
-                self._reject("object motion: no DAFC direction with a torque set that separates the D-contacts")
+                self._reject("object motion: no DAFC direction with a torque set that separates the D-contacts"
+                             if dset else "object motion: no DAFC direction towards the goal with a torque set")
                 continue
             ts, rates = best
             if dset:
                 dist = min(self.options.clearance * self.size / float(np.min(rates)), 0.5 * self.size)
-            else:
+            elif self.goal.type == "pose":
                 assert self.goal.pose is not None
-                dist = float(np.linalg.norm(np.asarray(self.goal.pose) - state.pose_vector()))
-            keep = [i for i in range(L) if i not in dset]
+                dist = min(float(np.linalg.norm(np.asarray(self.goal.pose) - state.pose_vector())),
+                           self.options.motion_step * self.size)
+            else:
+                dist = self.options.motion_step * self.size
+            keep = [i for i in range(L) if i not in dset and i not in sset]
             t0 = time.perf_counter()
             straight = integrate_object_motion(self.model, state, ts.direction, ts.dq, keep, list(dset), dist,
-                                               check_path=False)
+                                               check_path=False, sliding=sset)
             self.timing["motion"] += time.perf_counter() - t0
             if straight is None:
                 self._reject("object motion leaves the contact manifold or its end collides")
                 continue
             t0 = time.perf_counter()
             om = plan_object_motion(self.model, state, straight, keep, list(dset), seed=self.options.seed,
-                                    time_limit=self.options.ompl_time)
+                                    time_limit=self.options.ompl_time, sliding=sset)
             self.timing["ompl"] += time.perf_counter() - t0
             if om is None:
                 self._reject("OMPL found no collision-free object motion on the contact manifold")
                 continue
-            end = GraspState(state.contacts, om.q_path[-1], state.position, state.rotation, state.dim)
+            end = GraspState(self._slid_contacts(state, sset, om), om.q_path[-1], state.position, state.rotation,
+                             state.dim)
             final = _pose_state(end, om.pose_path[-1])
-            new = keep_contacts(final, keep, om.q_path[-1], final)
+            new = keep_contacts(final, sorted(keep + list(sset)), om.q_path[-1], final)
             if self.held(new) is None:
                 continue
             jl = float(np.sum(np.linalg.norm(np.diff(om.q_path, axis=0), axis=1)))
@@ -563,6 +582,7 @@ class ContactStateGraph:
                  "dim_force_polyhedron": ts.dim_P, "work": ts.work, "nlp_status": ts.nlp_status},
                 {"equation": "30-32", "dafc_dim": summ.dim_dafc, "a_bar": summ.a_bar,
                  "separation_rates": rates.tolist(), "separations": om.separations.tolist(),
+                 "sliding_contacts": list(sset),
                  "object_path_length": om.length, "manifold_residual": om.max_residual,
                  "ompl_planner_states": om.planner_states, "states_checked": om.states_checked,
                  "max_joint_step": om.max_joint_step, "ompl_seconds": om.ompl_seconds},
@@ -570,6 +590,21 @@ class ContactStateGraph:
             )
             out.append((t, new))
         return out
+
+    def _slid_contacts(self, state: GraspState, sset: tuple[int, ...], om: Any) -> tuple[GraspContact, ...]:
+        """The contacts after an object motion: sliding ones (``sset``) where their bodies touch the
+        object at the end (new points on the body and the object), the others unchanged."""
+        if not sset:
+            return state.contacts
+        man = ContactManifold(self.hand, state, [], sset, self.scene)
+        x = np.concatenate([om.q_path[-1], om.displacement_path[-1]])
+        out = list(state.contacts)
+        for k, i in enumerate(sset):
+            y, p_obj, n_obj = man.sliding_contact(k, x)
+            ref = man.sliding[k]
+            c = state.contacts[i]
+            out[i] = GraspContact(c.body, self.hand.to_local(ref, y, om.q_path[-1]), p_obj, n_obj, c.mu)
+        return tuple(out)
 
     def _direction_candidates(self, state: GraspState, p: Any, dset: tuple[int, ...],
                               example: Array | None) -> list[Array]:
@@ -591,6 +626,20 @@ class ContactStateGraph:
             if np.linalg.norm(c) > 1e-9:
                 out.append(c / np.linalg.norm(c))
         return out
+
+
+def _letters(state: GraspState, dset: tuple[int, ...], sset: tuple[int, ...]) -> str:
+    """The combination of an object motion: D for ``dset``, S (N without friction) for ``sset``,
+    F (N) for the others."""
+    out = []
+    for i, c in enumerate(state.contacts):
+        if i in dset:
+            out.append("D")
+        elif c.mu <= 0:
+            out.append("N")
+        else:
+            out.append("S" if i in sset else "F")
+    return "".join(out)
 
 
 def tip_body_name(hand: HandKinematics, finger: int) -> str:

@@ -59,6 +59,7 @@ import casadi as ca
 import numpy as np
 
 from analysis._types import Array
+from analysis.exceptions import SceneError
 from analysis.geometry import shape_signed_distance
 from analysis.kinematics import BodyRef, HandKinematics, SerialChain, segment_distance
 from analysis.rotations import rotvec_to_matrix, skew
@@ -846,23 +847,36 @@ def integrate_object_motion(
     distance: float,
     steps: int = 20,
     check_path: bool = True,
+    sliding: Sequence[int] = (),
 ) -> ObjectMotion | None:
     """Move the object by ``distance`` along ``dr`` with the fingers along ``dq``, projecting on
     the sticking contacts after every step; ``None`` if a link would penetrate the object or a
     separating contact would not separate. With ``check_path = False`` only the end configuration
-    is checked for collisions (the path is then planned by :func:`plan_object_motion`)."""
+    is checked for collisions (the path is then planned by :func:`plan_object_motion`).
+
+    ``sliding`` contacts (S or N; disk and sphere objects) keep touching while they slide: the
+    object then follows the projection of ``[q; s] + h [dq; dr]`` onto :class:`ContactManifold`
+    (minimum-norm Newton steps on hand and object together), not exactly the straight line."""
     hand = model.hand
+    man = ContactManifold(hand, state, sticking, sliding, model.scene) if sliding else None
+    x = np.concatenate([state.q, np.zeros(len(dr))])
     h = distance / steps
     cur = state
     q = state.q.copy()
     qs, poses = [q.copy()], [state.pose_vector()]
     worst_res = 0.0
-    busy = [hand.resolve_body(state.contacts[i].body) for i in (*sticking, *separating)]
+    busy = [hand.resolve_body(state.contacts[i].body) for i in (*sticking, *separating, *sliding)]
     allow = [model.start_allowance(f, state.q, state.position, state.rotation) for f in range(len(hand.fingers))]
     limits = [joint_limits(hand, f) for f in range(len(hand.fingers))]
     for _ in range(steps):
-        cur = moved(cur, h * dr)
-        q, res = project_contacts(hand, cur, q + h * dq, sticking)
+        if man is None:
+            cur = moved(cur, h * dr)
+            q, res = project_contacts(hand, cur, q + h * dq, sticking)
+        else:
+            x, res = project_manifold(man, x + h * np.concatenate([dq, dr]))
+            q = x[: hand.M]
+            pos, R = man.pose(x[hand.M:])
+            cur = GraspState(cur.contacts, q, pos, R, cur.dim)
         worst_res = max(worst_res, res)
         if res > 1e-6:
             return None
@@ -894,6 +908,21 @@ def integrate_object_motion(
     return ObjectMotion(np.array(qs), np.array(poses), seps_a, length, worst_res)
 
 
+def project_manifold(man: ContactManifold, x: Array, tolerance: float = 1e-11, iters: int = 50) -> tuple[Array, float]:
+    """Newton projection of ``x`` ``(M + D,)`` onto ``F(x) = 0`` with minimum-norm steps (the
+    pseudo-inverse of ``F'``, as OMPL's ``ProjectedStateSpace`` projects); returns the point and
+    ``|F|`` there."""
+    x = np.array(x, dtype=float)
+    res = 0.0
+    for _ in range(iters):
+        F = man.function(x)
+        res = float(np.linalg.norm(F))
+        if res <= tolerance:
+            break
+        x = x - np.linalg.lstsq(man.jacobian(x), F, rcond=None)[0]
+    return x, res
+
+
 def keep_contacts(state: GraspState, keep: Sequence[int], q: Array, pose: GraspState) -> GraspState:
     """The state after a motion: only the contacts ``keep``, configuration ``q``, pose of ``pose``."""
     contacts: tuple[GraspContact, ...] = tuple(state.contacts[i] for i in keep)
@@ -919,13 +948,15 @@ class ContactManifold:
     the object displacement from the state's pose (2-D ``(dx, dy, dtheta)``; 3-D ``(dp, w)``, the
     object at ``p_o + dp`` with rotation ``exp(w) R_0``).
 
-    ``F(x)`` ``(d * n,)`` stacks, for every sticking contact ``i``, the body point minus the object
-    point, ``x_b,i(q) - (p_o + dp + R(s) c_i)``, which is zero on the manifold (the F-points of
-    eq. 7 do not move relative to each other); its Jacobian is ``[J_c, -G^T]`` with the object part
-    in these coordinates, so ``F'(x) [dq; ds] = 0`` at ``s = 0`` is ``A_c [dq; dr] = 0`` restricted
-    to the F-points (eq. 7, 19)."""
+    ``F(x)`` ``(d * n_F + n_S,)`` stacks, for every sticking contact ``i``, the body point minus the
+    object point, ``x_b,i(q) - (p_o + dp + R(s) c_i)``, which is zero on the manifold (the F-points
+    of eq. 7 do not move relative to each other), and for every sliding contact (S or N, disks and
+    spheres only) the gap between the body's surface and the object's, which is zero while it
+    slides (eq. 5: only the normal component is constrained). The Jacobian is ``[J_c, -G^T]`` in
+    these coordinates, so ``F'(x) [dq; ds] = 0`` at ``s = 0`` is ``A_c [dq; dr] = 0`` (eq. 7, 19)."""
 
-    def __init__(self, hand: HandKinematics, state: GraspState, sticking: Sequence[int]):
+    def __init__(self, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
+                 sliding: Sequence[int] = (), scene: Scene | None = None):
         self.hand, self.state, self.dim = hand, state, state.dim
         self.M, self.D = hand.M, 3 if state.dim == 2 else 6
         self.items: list[tuple[BodyRef | None, Array, Array]] = []  # (finger body or None, point_body, point_obj)
@@ -937,7 +968,53 @@ class ContactManifold:
                 self.items.append((None, state.world_point(i), np.asarray(c.point_object, float)))
             else:
                 self.items.append((ref, np.asarray(c.point_body, float), np.asarray(c.point_object, float)))
-        self.rows = self.dim * len(self.items)
+        self.sliding: list[BodyRef] = []
+        if sliding:
+            if scene is None or not isinstance(scene.object.shape, Disk | Sphere):
+                raise SceneError(("object", "shape"), "sliding contacts are followed for disks and spheres only")
+            self.scene, self.radius = scene, float(scene.object.shape.radius)
+        for i in sliding:
+            ref = hand.resolve_body(state.contacts[i].body)
+            assert ref is not None
+            self.sliding.append(ref)
+        self.rows = self.dim * len(self.items) + len(self.sliding)
+
+    def body_distance(self, ref: BodyRef, c: Array, q: Array) -> tuple[float, Array, Array]:
+        """Distance of the object centre ``c`` ``(d,)`` from the surface of the body ``ref`` at ``q``,
+        the unit vector ``u`` ``(d,)`` from the body towards ``c`` and the closest body point ``(d,)``
+        on the body's axis (fixed bodies: on the surface)."""
+        d = self.dim
+        if ref.finger is None:
+            body = next(b for b in self.scene.fixed_bodies if b.name == ref.name)
+
+            def sd_at(x: Array) -> float:
+                v = shape_signed_distance(body.shape, x, d)
+                assert v is not None  # fixed shapes all have distances
+                return v
+
+            h = 1e-7  # central differences of the body's distance field: its gradient points at c
+            grad = np.array([sd_at(c + h * e) - sd_at(c - h * e) for e in np.eye(d)]) / (2 * h)
+            u = grad / np.linalg.norm(grad)
+            sd = sd_at(c)
+            return sd, u, c - sd * u
+        a, b = self.hand.body_segment(ref, q)
+        a, b = a[:d], b[:d]
+        e = b - a
+        t = float(np.clip((c - a) @ e / max(float(e @ e), 1e-300), 0.0, 1.0))
+        y = a + t * e
+        dist = float(np.linalg.norm(c - y))
+        return dist - self.hand.body_radius(ref), (c - y) / max(dist, 1e-300), y
+
+    def sliding_contact(self, k: int, x: Array) -> tuple[Array, Array, Array]:
+        """Sliding contact ``k`` at ``x``: body point (world ``(d,)``), object point and inward normal
+        (object frame ``(d,)``) where the body touches the disk or sphere."""
+        q, s = x[: self.M], x[self.M:]
+        pos, R = self.pose(s)
+        d = self.dim
+        _, u, _ = self.body_distance(self.sliding[k], pos, q)
+        y = pos - self.radius * u  # the touching point, on both surfaces when the gap is zero
+        Rt = R[:d, :d].T
+        return y, Rt @ (y - pos), Rt @ u
 
     def pose(self, s: Array) -> tuple[Array, Array]:
         """Object position ``(d,)`` and rotation ``(3, 3)`` at displacement ``s``."""
@@ -956,11 +1033,13 @@ class ContactManifold:
         for k, (ref, pb, po) in enumerate(self.items):
             xb = pb[:d] if ref is None else self.hand.point_position(ref, pb, q)
             out[d * k: d * k + d] = xb - (pos + (R[:d, :d] @ po))
+        for k, ref in enumerate(self.sliding):  # S-points: the gap to the disk/sphere is zero
+            out[d * len(self.items) + k] = self.body_distance(ref, pos, q)[0] - self.radius
         return out
 
     def jacobian(self, x: Array) -> Array:
         q, s = x[: self.M], x[self.M:]
-        _, R = self.pose(s)
+        pos_, R = self.pose(s)
         d = self.dim
         J = np.zeros((self.rows, self.M + self.D))  # (d n, M + D)
         for k, (ref, pb, po) in enumerate(self.items):
@@ -973,6 +1052,12 @@ class ContactManifold:
                 J[r, self.M + 2] = -np.array([-y[1], y[0]])
             else:
                 J[r, self.M + 3:] = skew(y) @ _left_jacobian_so3(s[3:])
+        for k, ref in enumerate(self.sliding):  # d gap = u^T (d p_o - J(y) dq); the centre is p_o
+            row = d * len(self.items) + k
+            _, u, yb = self.body_distance(ref, pos_, q)
+            if ref.finger is not None:
+                J[row, : self.M] = -u @ self.hand.point_jacobian(ref, yb, q)
+            J[row, self.M: self.M + d] = u
         return J
 
 
@@ -1001,12 +1086,13 @@ def plan_object_motion(
     seed: int = 0,
     time_limit: float = 1.0,
     tolerance: float = 1e-8,
+    sliding: Sequence[int] = (),
 ) -> ConstrainedObjectMotion | None:
     """Plan the motion of hand and object from ``state`` to the end of ``goal`` (the configuration
     reached along the DAFC direction, :func:`integrate_object_motion`) with OMPL's constrained
     planning: a ``ProjectedStateSpace`` over ``[q; s]`` with the constraint
-    :class:`ContactManifold` of the sticking contacts (``A_c [dq; dr] = 0``, eq. 7 and 19, to
-    every order), ``RRTConnect`` (seeded) whose motions are geodesics of the manifold, a validity
+    :class:`ContactManifold` of the sticking and ``sliding`` contacts (``A_c [dq; dr] = 0``, eq. 7
+    and 19, to every order), ``RRTConnect`` (seeded) whose motions are geodesics of the manifold, a validity
     checker for joint limits and collisions (:meth:`CollisionModel.finger_clearance`; the contact
     links may touch the object, overlaps present at the start may not deepen), and the solution
     densified on the manifold until no joint moves more than :data:`DENSE_STEP` between two
@@ -1019,13 +1105,13 @@ def plan_object_motion(
     from ompl import util as ou
 
     hand = model.hand
-    man = ContactManifold(hand, state, sticking)
+    man = ContactManifold(hand, state, sticking, sliding, model.scene)
     M, D = man.M, man.D
     n = M + D
     q0, q1 = state.q, goal.q_path[-1]
-    s1 = _displacement(state, goal.pose_path[-1])
+    s1 = pose_displacement(state, goal.pose_path[-1])
     x0, x1 = np.concatenate([q0, np.zeros(D)]), np.concatenate([q1, s1])
-    busy = [hand.resolve_body(state.contacts[i].body) for i in (*sticking, *separating)]
+    busy = [hand.resolve_body(state.contacts[i].body) for i in (*sticking, *separating, *sliding)]
     allow = [model.start_allowance(f, state.q, state.position, state.rotation) for f in range(len(hand.fingers))]
     limits = [joint_limits(hand, f) for f in range(len(hand.fingers))]
     touching = [[b for b in busy if b is not None and b.finger == f] for f in range(len(hand.fingers))]
@@ -1134,7 +1220,7 @@ def _densify(man: ContactManifold, X: Array, max_step: float, tolerance: float) 
     return np.array(out)
 
 
-def _displacement(state: GraspState, pose: Array) -> Array:
+def pose_displacement(state: GraspState, pose: Array) -> Array:
     """The ambient object coordinates ``s`` of :class:`ContactManifold` of a pose vector."""
     from analysis.rotations import matrix_to_rotvec
 

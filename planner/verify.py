@@ -8,7 +8,8 @@ contact point lies on its body and on the object) and:
   others (``J_c dq = 0`` to first order);
 * ``contact`` (33): the new grasp has a stationary grasp (18) and the finger path is
   collision-free (certified);
-* ``object_motion`` (30-32): the combination has a stationary grasp, the direction is a DAFC
+* ``object_motion`` (30-32): every waypoint of the path lies on the contact manifold (F-points
+  together, S-points touching), the combination has a stationary grasp, the direction is a DAFC
   member (22 by the LP oracle), the torque set (32) for it is not empty, and the chosen torque's
   contact forces satisfy (32) (residuals);
 * every state after a step holds the object (18 for all-F).
@@ -71,6 +72,7 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
         grasp = before.stationary(t.combination)
         if grasp is None:
             return [*problems, f"{tag}: no stationary grasp (18) for {t.combination}"]
+        problems.extend(_manifold_problems(scene, hand, step, tag))
         p = before.parts(t.combination)
         oracle = p.oracle()
         assert t.torque_set is not None
@@ -87,6 +89,23 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
             except CTPError as e:
                 problems.append(f"{tag}: torque set (32) empty: {e}")
     return problems
+
+
+def _manifold_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
+    """Every waypoint of an object motion lies on the contact manifold of its F-points (body point =
+    object point) and S/N-points (touching), eq. (7) to every order, within 1e-6."""
+    from planner.ompl_paths import ContactManifold, pose_displacement
+
+    t = step.transition
+    sticking = [i for i, ch in enumerate(t.combination) if ch == "F"]
+    sliding = [i for i, ch in enumerate(t.combination) if ch in "SN"]
+    try:
+        man = ContactManifold(hand, step.before, sticking, sliding, scene)
+    except CTPError as e:
+        return [f"{tag}: {e}"]
+    worst = max(float(np.linalg.norm(man.function(np.concatenate([q, pose_displacement(step.before, pose)]))))
+                for q, pose in zip(t.q_path, t.object_path, strict=True))
+    return [] if worst <= 1e-6 else [f"{tag}: path leaves the contact manifold (residual {worst:.2g})"]
 
 
 def verify_plan(scene: Scene, plan: Plan) -> list[str]:
