@@ -1209,13 +1209,7 @@ def _densify(man: ContactManifold, X: Array, max_step: float, tolerance: float) 
     for a, b in itertools.pairwise(X):
         k = int(np.ceil(float(np.max(np.abs(b[:M] - a[:M]))) / max_step * 1.02))
         for t in np.arange(1, k) / max(k, 1):
-            x = a + t * (b - a)
-            for _ in range(50):
-                F = man.function(x)
-                if float(np.linalg.norm(F)) <= tolerance:
-                    break
-                x = x - np.linalg.lstsq(man.jacobian(x), F, rcond=None)[0]
-            out.append(x)
+            out.append(project_manifold(man, a + t * (b - a), tolerance)[0])
         out.append(b)
     return np.array(out)
 
