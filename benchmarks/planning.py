@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/planning.py                 # planar example (target < 5 s)
     .venv/bin/python benchmarks/planning.py --sphere        # also the 3-D sphere (target < 30 s)
     .venv/bin/python benchmarks/planning.py --repeat 3
+    .venv/bin/python benchmarks/planning.py --slide         # also a pose goal reached by sliding
 
 For each scene: whether a plan to active closure was found, its steps, nodes expanded and
 generated, lazy edges checked, and the time split between the closure analysis, OMPL (transfer
@@ -26,18 +27,19 @@ from analysis.scene import load_scene  # noqa: E402
 from planner import Goal, plan  # noqa: E402
 
 
-def run(name: str, target: float, repeat: int, time_limit: float | None) -> None:
+def run(name: str, target: float, repeat: int, time_limit: float | None, goal: Goal | None = None) -> None:
     scene = load_scene(ROOT / "examples" / f"{name}.json")
+    goal = goal or Goal(type="active")
     totals = []
     last = None
     for _ in range(repeat):
-        p = plan(scene, Goal(type="active"), time_limit=time_limit)
+        p = plan(scene, goal, time_limit=time_limit)
         totals.append(p.stats.seconds_total)
         last = p
     assert last is not None
     s = last.stats
-    print(f"\n{name}: found={last.found} steps={len(last.steps)} "
-          f"({', '.join(st.transition.kind for st in last.steps)})")
+    print(f"\n{name}, goal {goal.model_dump(exclude_none=True)}: found={last.found} steps={len(last.steps)} "
+          f"({', '.join(st.transition.kind + ' ' + st.transition.combination for st in last.steps)})")
     if not last.found:
         print(f"  reason: {last.reason}")
     print(f"  time to plan: median {statistics.median(totals):.2f} s over {repeat} run(s) "
@@ -53,10 +55,15 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--sphere", action="store_true", help="also plan for sphere_four_finger_palm")
+    ap.add_argument("--slide", action="store_true",
+                    help="also the planar pose goal (0.1, 0.5, 0) reached by sliding the disk on the palm")
     ap.add_argument("--time-limit", type=float, default=None)
     args = ap.parse_args()
     print("machine:", machine())
     run("planar_disk_envelope", 5.0, args.repeat, args.time_limit)
+    if args.slide:
+        run("planar_disk_envelope", 5.0, args.repeat, args.time_limit,
+            Goal(type="pose", pose=[0.1, 0.5, 0.0], tolerance=0.02))
     if args.sphere:
         run("sphere_four_finger_palm", 30.0, args.repeat, args.time_limit or 120.0)
 
