@@ -225,9 +225,76 @@ def modes(
         console.print(f"wrote {json_out}")
 
 
+def _read_plan_file(path: Path) -> dict[str, Any] | None:
+    """The parsed plan when ``path`` is a plan file (a JSON object with top-level ``"steps"``),
+    else None (a scene file)."""
+    if path.suffix.lower() != ".json":
+        return None
+    try:
+        data = json.loads(path.read_text())
+    except OSError as e:
+        _fail(f"{path}: cannot read: {e.strerror}")
+    except json.JSONDecodeError:
+        return None  # let the scene loader report it
+    return data if isinstance(data, dict) and "steps" in data else None
+
+
+def _plan_scene(plan_path: Path, data: dict[str, Any], scene_path: Path | None) -> Any:
+    """The scene a plan file was made for: ``--scene``, else the file's ``"scene"`` entry."""
+    from analysis.scene import scene_from_dict
+
+    if scene_path is not None:
+        return _load(scene_path)
+    if "scene" not in data:
+        _fail(f"{plan_path}: scene: the plan file has no 'scene' entry (plans from 'ctp plan --out' have one); "
+              "give --scene PATH")
+    try:
+        return scene_from_dict(data["scene"])
+    except SceneError as e:
+        _fail(f"{plan_path}: scene.{e}")
+
+
+def _simulate_plan_file(plan_path: Path, data: dict[str, Any], scene_path: Path | None,
+                        json_out: Path | None) -> None:
+    """``ctp simulate PLAN.json``: the continuous replay of :func:`planner.simulate_plan.simulate_plan`.
+    Exit code 0 with the report, 1 if the object was dropped, 2 for bad input."""
+    from planner.simulate_plan import simulate_plan
+
+    sc = _plan_scene(plan_path, data, scene_path)
+    try:
+        rep = simulate_plan(sc, data)
+    except SceneError as e:
+        _fail(f"{plan_path}: {e}")
+    except CTPError as e:
+        _fail(str(e), code=1)
+    _print_plan_simulation(rep)
+    if json_out:
+        json_out.write_text(json.dumps(rep.to_json(), indent=1))
+        console.print(f"wrote {json_out}")
+    if rep.dropped:
+        raise typer.Exit(1)
+
+
+def _print_plan_simulation(rep: Any) -> None:
+    for s in rep.steps:
+        who = f" ({s.driven_finger})" if s.driven_finger else ""
+        console.print(f"step {s.index} {s.kind}{who} {s.combination}: object moved {_fmt(s.simulated, 5)} "
+                      f"(planned {_fmt(s.planned, 5)}); off path {s.max_deviation:.2e}; "
+                      f"tracking {s.tracking_error:.1e} rad; {s.duration:.3f} s; {s.note}",
+                      highlight=False, soft_wrap=True)
+    console.print(f"final pose simulated {_fmt(rep.simulated_final_pose, 5)} vs planned "
+                  f"{_fmt(rep.planned_final_pose, 5)}", highlight=False, soft_wrap=True)
+    console.print(f"displacement simulated {_fmt(rep.simulated, 5)} vs planned {_fmt(rep.planned, 5)}: "
+                  f"relative error {rep.relative_error:.2%} (tolerance {rep.tolerance:.0%}); "
+                  f"largest regrasp drift {rep.max_regrasp_deviation:.2e} (object size {rep.object_size:.3g}); "
+                  f"{rep.duration:.2f} s simulated", highlight=False, soft_wrap=True)
+    console.print("dropped: " + (f"YES ({rep.drop_reason})" if rep.dropped else "no") + "; "
+                  + ("within tolerance" if rep.ok else "NOT within tolerance"), highlight=False, soft_wrap=True)
+
+
 @app.command()
 def simulate(
-    scene: Annotated[Path, typer.Argument(help="scene file (.json, .yaml)")],
+    scene: Annotated[Path, typer.Argument(help="scene file (.json, .yaml), or a plan file from 'ctp plan --out'")],
     combination: Annotated[str | None, typer.Option(help="expected contact states, e.g. DDDFF")] = None,
     torque: Annotated[str | None, typer.Option(help="joint torques, e.g. '0,0,3.48,2.20'; default: the "
                                                      "recommended member of T for --combination")] = None,
@@ -236,12 +303,24 @@ def simulate(
     stop_fraction: Annotated[float, typer.Option(help="stop once the object moved this fraction of its size "
                                                       "(the analysis is first order)")] = 0.02,
     json_out: Annotated[Path | None, typer.Option("--json", help="write the result to this JSON file")] = None,
+    scene_file: Annotated[Path | None, typer.Option("--scene", help="plan files: the scene it was planned "
+                                                                     "from (default: the file's 'scene')")] = None,
 ) -> None:
-    """Replay joint torques in MuJoCo (quasi-static) and report the object's motion and contacts."""
+    """Replay joint torques in MuJoCo (quasi-static) and report the object's motion and contacts;
+    or, given a plan file, replay the whole plan in one simulation and compare the final pose with
+    the plan's (exit code 1 if the object was dropped)."""
     from analysis.combination import analyze_combination
     from analysis.contacts import build_system
     from analysis.simulate import format_report, simulate_torques
 
+    plan_data = _read_plan_file(scene)
+    if plan_data is not None:
+        if combination is not None or torque is not None or direction is not None:
+            _fail("combination/torque/direction: do not apply to a plan file")
+        _simulate_plan_file(scene, plan_data, scene_file, json_out)
+        return
+    if scene_file is not None:
+        _fail(f"scene: --scene is for plan files; {scene} is not a plan (no 'steps')")
     sc = _load(scene)
     if duration <= 0:
         _fail(f"duration: {duration} must be positive")
@@ -295,7 +374,7 @@ def plan(
     tolerance: Annotated[float, typer.Option(help="pose tolerance (scene units and radians)")] = 0.05,
     time_limit: Annotated[float | None, typer.Option(help="seconds for the search")] = None,
     out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
-    replay: Annotated[bool, typer.Option(help="replay the plan step by step in MuJoCo")] = False,
+    replay: Annotated[bool, typer.Option(help="replay the whole plan in MuJoCo (one continuous simulation)")] = False,
 ) -> None:
     """Plan contact-state transitions to a goal closure (the planner of issue 3)."""
     from pydantic import ValidationError
@@ -324,7 +403,7 @@ def plan(
         except CTPError as e:
             _fail(str(e), code=1)
     if not result.found:
-        console.print(f"[bold red]no plan:[/] {result.reason}", highlight=False)
+        console.print(f"[bold red]no plan:[/] {result.reason}", highlight=False, soft_wrap=True)
     else:
         table = Table(title=f"plan: {len(result.steps)} steps, cost {result.cost:.3f}")
         for col in ("step", "kind", "combination", "contacts after", "cost"):
@@ -336,16 +415,16 @@ def plan(
         console.print(f"object displacement {_fmt(result.displacement)}; "
                       f"{result.stats.nodes_expanded} nodes expanded in {result.stats.seconds_total:.2f} s")
     data = result.to_json()
+    data["scene"] = sc.model_dump(mode="json", exclude_none=True)  # 'ctp simulate PLAN.json' reloads it
     if replay and result.found:
-        from planner.replay import replay_plan
+        from planner.simulate_plan import simulate_plan
 
-        rp = replay_plan(sc, result)
-        for s in rp.steps:
-            console.print(f"replay step {s.index} {s.kind}: {'ok' if s.ok else 'FAILED'} ({s.note})", highlight=False)
-        console.print(f"replay: simulated displacement {_fmt(rp.simulated)} vs planned {_fmt(rp.planned)}; "
-                      f"relative error {rp.relative_error:.3%}; dropped: {rp.dropped}", highlight=False)
-        data["replay"] = {"relative_error": rp.relative_error, "dropped": rp.dropped, "ok": rp.ok,
-                          "simulated": rp.simulated.tolist(), "planned": rp.planned.tolist()}
+        try:
+            rep = simulate_plan(sc, result)
+        except CTPError as e:
+            _fail(f"replay: {e}", code=1)
+        _print_plan_simulation(rep)
+        data["replay"] = rep.to_json()
     if out is not None:
         out.write_text(json.dumps(data, indent=1))
         console.print(f"wrote {out}")

@@ -101,6 +101,8 @@ class Plan:
     cost: float
     stats: PlanStats
     rejections: dict[str, int] = field(default_factory=dict)
+    #: ``tau_st`` (18) ``(M,)`` of the final grasp: the torque that holds the object once the plan is done
+    final_tau: Array | None = None
 
     @property
     def displacement(self) -> Array:
@@ -118,6 +120,7 @@ class Plan:
             "displacement": _list(self.displacement),
             "final_contacts": list(self.final_contacts),
             "final_combination": self.final_combination,
+            "final_holding_torque": _list(self.final_tau),
             "cost": self.cost if np.isfinite(self.cost) else None,
             "stats": self.stats.to_json(),
             "rejections": self.rejections,
@@ -198,12 +201,15 @@ def plan(
     )
     steps: list[PlanStep] = []
     final: GraspState = start
+    final_tau: Array | None = None
     cost = float("inf")
     if result is not None and result.found:
         for i, (a, b) in enumerate(zip(result.path, result.path[1:], strict=False)):
             steps.append(PlanStep(i, result.graph.edges[a, b]["data"], graph.states[a], graph.states[b]))
         final = graph.states[result.path[-1]]
         cost = result.cost
+        held = graph.analysis(final).stationary(all_f(final))
+        final_tau = None if held is None else np.asarray(held.tau, dtype=float)
     if progress is not None:
         progress(1.0, reason)
     return Plan(
@@ -218,4 +224,5 @@ def plan(
         cost=cost,
         stats=stats,
         rejections=dict(graph.rejections),
+        final_tau=final_tau,
     )

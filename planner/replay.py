@@ -14,6 +14,7 @@ Each step is replayed from its own planned state (the scene of the state before 
 The object's total displacement is the sum of the steps' displacements, compared with the plan's.
 ``simulate_torques`` restarts from a scene, so the steps are chained through the planned states,
 not through the simulated ones: this checks every step's physics, not the drift of a whole run.
+The whole run, one simulation through every step, is :func:`planner.simulate_plan.simulate_plan`.
 """
 
 from __future__ import annotations

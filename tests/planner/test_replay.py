@@ -1,12 +1,23 @@
 """MuJoCo replay of the planar plan: the object ends within 5 % of the planned displacement and is
-never dropped; every regrasp step holds the object still."""
+never dropped; every regrasp step holds the object still. Step by step (``replay_plan``) and as one
+continuous simulation (``simulate_plan``, ``ctp simulate PLAN.json``)."""
 
 from __future__ import annotations
 
-import numpy as np
+import json
+from pathlib import Path
 
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from analysis.cli import app
 from analysis.scene import Scene
+from analysis.simulate import object_size
 from planner.replay import replay_plan
+from planner.simulate_plan import simulate_plan
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 
 def test_planar_plan_replays_in_mujoco(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
@@ -17,3 +28,126 @@ def test_planar_plan_replays_in_mujoco(planar_scene: Scene, planar_plan) -> None
     assert r.relative_error <= 0.05
     lift = [s for s in r.steps if s.kind == "object_motion"]
     assert lift and all(s.simulated[1] > 0 for s in lift)  # the object really rises off the palm
+
+
+# --------------------------------------------------------------------------------------------
+# Continuous replay of the whole plan (planner.simulate_plan): one simulation, never reset
+
+
+@pytest.fixture(scope="module")
+def planar_continuous(planar_scene: Scene, planar_plan):  # type: ignore[no-untyped-def]
+    return simulate_plan(planar_scene, planar_plan)
+
+
+def test_planar_plan_continuous_replay_meets_the_plan(planar_scene: Scene, planar_plan, planar_continuous) -> None:  # type: ignore[no-untyped-def]
+    r = planar_continuous
+    s = object_size(planar_scene)
+    assert not r.dropped, r.drop_reason
+    assert [st.kind for st in r.steps] == [st.transition.kind for st in planar_plan.steps]
+    np.testing.assert_allclose(r.planned, planar_plan.displacement, atol=1e-9)
+    assert float(np.linalg.norm(r.planned)) > 0.0
+    assert r.relative_error <= 0.05, (r.simulated, r.planned)
+    # the final pose is within 5 % of the planned displacement of the planned final pose
+    err = float(np.linalg.norm(r.simulated_final_pose - planar_plan.final_pose))
+    assert err <= 0.05 * float(np.linalg.norm(planar_plan.displacement))
+    # the object stays still while fingers let go and make contact (well under 1 % of its size)
+    assert r.max_regrasp_deviation <= 2e-3 * s
+    # the fingers moved kinematically along their paths, unobstructed (rad, per 0.2 ms step)
+    assert 0.0 <= r.tracking_error <= 1e-4
+    driven = [st for st in r.steps if st.kind != "object_motion"]
+    assert [st.driven_finger for st in driven] == ["left", "left", "right", "right"]
+    # the object motion lifts the disk off the palm by the planned amount
+    lift = r.steps[-1]
+    assert lift.kind == "object_motion" and lift.simulated[1] > 0.95 * lift.planned[1] > 0.0
+    assert r.ok
+
+
+def test_ctp_simulate_replays_a_plan_file(tmp_path, planar_continuous) -> None:  # type: ignore[no-untyped-def]
+    plan_file, rep_file = tmp_path / "plan.json", tmp_path / "replay.json"
+    r = CliRunner().invoke(app, ["plan", str(EXAMPLES / "planar_disk_envelope.json"), "--goal", "active",
+                                 "--out", str(plan_file)])
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(app, ["simulate", str(plan_file), "--json", str(rep_file)])
+    assert r.exit_code == 0, r.output
+    assert "final pose simulated" in r.output and "dropped: no" in r.output
+    rep = json.loads(rep_file.read_text())
+    assert not rep["dropped"] and rep["ok"] and rep["relative_error"] <= 0.05
+    assert len(rep["steps"]) == len(planar_continuous.steps)
+    # the file (rounded to 1e-10) replays like the in-memory plan
+    np.testing.assert_allclose(rep["simulated_final_pose"], planar_continuous.simulated_final_pose, atol=1e-6)
+    # --scene instead of the file's own scene entry
+    data = json.loads(plan_file.read_text())
+    del data["scene"]
+    bare = tmp_path / "bare.json"
+    bare.write_text(json.dumps(data))
+    r = CliRunner().invoke(app, ["simulate", str(bare), "--scene", str(EXAMPLES / "planar_disk_envelope.json")])
+    assert r.exit_code == 0, r.output
+
+
+def _plan_dict(tmp_path: Path) -> dict:  # type: ignore[type-arg]
+    out = tmp_path / "plan.json"
+    r = CliRunner().invoke(app, ["plan", str(EXAMPLES / "planar_disk_envelope.json"), "--goal", "active",
+                                 "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    data: dict = json.loads(out.read_text())  # type: ignore[type-arg]
+    return data
+
+
+@pytest.mark.parametrize(
+    ("case", "field"),
+    [
+        ("not_a_plan", "object"),  # a JSON object without "steps" is read as a scene: it has no object
+        ("not_found", "found"),
+        ("no_scene", "scene"),
+        ("bad_scene", "scene.object"),
+        ("steps_not_list", "steps"),
+        ("short_joint_path", "steps.1.joint_path"),
+        ("bad_kind", "steps.0.kind"),
+        ("bad_torque", "steps.4.torques.chosen"),
+        ("bad_final_torque", "final_holding_torque"),
+    ],
+)
+def test_ctp_simulate_bad_plan_files_exit_2(tmp_path, case: str, field: str) -> None:  # type: ignore[no-untyped-def]
+    data = _plan_dict(tmp_path)
+    if case == "not_a_plan":
+        data = {"dim": 2}
+    elif case == "not_found":
+        data.update(found=False, steps=[], reason="time limit")
+    elif case == "no_scene":
+        del data["scene"]
+    elif case == "bad_scene":
+        data["scene"]["object"] = 3
+    elif case == "steps_not_list":
+        data["steps"] = 3
+    elif case == "short_joint_path":
+        data["steps"][1]["joint_path"] = [row[:3] for row in data["steps"][1]["joint_path"]]
+    elif case == "bad_kind":
+        data["steps"][0]["kind"] = "teleport"
+    elif case == "bad_torque":
+        data["steps"][4]["torques"]["chosen"] = [1.0, 2.0]
+    elif case == "bad_final_torque":
+        data["final_holding_torque"] = [0.0, float("nan")]
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(data))
+    r = CliRunner().invoke(app, ["simulate", str(bad)])
+    assert r.exit_code == 2, r.output
+    assert "Traceback" not in r.output
+    assert field in r.output, r.output
+
+
+def test_ctp_simulate_missing_plan_file_exits_2(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    r = CliRunner().invoke(app, ["simulate", str(tmp_path / "nowhere.json")])
+    assert r.exit_code == 2 and "cannot read" in r.output
+
+
+def test_final_holding_torque_rebuilt_from_the_file_equals_the_planners(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
+    """For plan files without ``final_holding_torque`` the final grasp is rebuilt from the file
+    (points, bodies, object-surface normals): its tau_st (18) is the planner's."""
+    from analysis.kinematics import HandKinematics
+    from planner.simulate_plan import final_holding_torque, parse_plan
+
+    hand = HandKinematics.from_scene(planar_scene)
+    steps = parse_plan(planar_plan.to_json(), planar_scene, hand)
+    rebuilt = final_holding_torque(planar_scene, hand, steps[-1])
+    assert planar_plan.final_tau is not None and rebuilt is not None
+    np.testing.assert_allclose(rebuilt, planar_plan.final_tau, atol=1e-8)

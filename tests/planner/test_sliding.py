@@ -43,7 +43,7 @@ def test_sliding_needs_a_disk_or_sphere(planar_scene: Scene) -> None:
     st = state_from_scene(planar_scene, hand)
     boxed = planar_scene.model_copy(update={"object": planar_scene.object.model_copy(
         update={"shape": Box(type="box", size=[1.0, 1.0])})})
-    with pytest.raises(SceneError, match="object.shape"):
+    with pytest.raises(SceneError, match=r"object\.shape"):
         ContactManifold(hand, st, [], [0], boxed)
 
 

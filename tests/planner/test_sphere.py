@@ -1,5 +1,6 @@
 """The 3-D example: a plan from the enveloping grasp to active closure, checked by the analysis
-and replayed in MuJoCo (slow: about 20-40 s of planning on 2 shared cores)."""
+and replayed in MuJoCo, step by step and as one continuous simulation (slow: about 20-40 s of
+planning on 2 shared cores)."""
 
 from __future__ import annotations
 
@@ -8,8 +9,10 @@ import pytest
 from conftest import EXAMPLES
 
 from analysis.scene import load_scene
+from analysis.simulate import object_size
 from planner import Goal, plan
 from planner.replay import replay_plan
+from planner.simulate_plan import simulate_plan
 from planner.verify import verify_plan
 
 
@@ -24,3 +27,12 @@ def test_sphere_plan_to_active_closure_replays() -> None:
     r = replay_plan(scene, p)
     assert not r.dropped and all(s.ok for s in r.steps)
     assert float(np.linalg.norm(r.planned)) > 0 and r.relative_error <= 0.05
+    # the whole plan in one simulation from the scene, through the JSON form a plan file holds
+    c = simulate_plan(scene, p.to_json())
+    assert not c.dropped, c.drop_reason
+    np.testing.assert_allclose(c.planned, p.displacement, atol=1e-9)
+    assert c.relative_error <= 0.05, (c.simulated, c.planned)
+    assert float(np.linalg.norm(c.simulated_final_pose - p.final_pose)) <= 0.05 * float(np.linalg.norm(p.displacement))
+    assert c.max_regrasp_deviation <= 2e-3 * object_size(scene)  # still while fingers regrasp
+    assert 0.0 <= c.tracking_error <= 1e-4
+    assert [s.driven_finger for s in c.steps] == [st.transition.figures.get("finger") for st in p.steps]
