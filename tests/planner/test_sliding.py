@@ -94,3 +94,15 @@ def test_sliding_steps_replay_in_mujoco(planar_scene: Scene, slide_plan) -> None
                            stop_distance=float(np.linalg.norm(t.object_path[-1] - t.object_path[0])))
     assert [c.observed for c in res.contacts] == ["slide" if ch == "S" else "stick" for ch in t.combination]
     assert all(c.agrees for c in res.contacts)
+
+
+def test_sliding_plan_replays_continuously(planar_scene: Scene, slide_plan) -> None:  # type: ignore[no-untyped-def]
+    """The whole pose plan (regrasps, then six sliding motions) in one MuJoCo run ends within 5 %
+    of the planned displacement and never drops the disk."""
+    from planner.simulate_plan import simulate_plan
+
+    r = simulate_plan(planar_scene, slide_plan)
+    assert not r.dropped, r.drop_reason
+    assert r.relative_error <= 0.05
+    slides = [s for s in r.steps if "S" in s.combination]
+    assert slides and all(s.simulated[0] > 0.9 * s.planned[0] for s in slides)
