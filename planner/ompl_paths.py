@@ -837,6 +837,37 @@ def moved(state: GraspState, pose_step: Array) -> GraspState:
     return GraspState(state.contacts, state.q, pos, R, d)
 
 
+@dataclass(frozen=True)
+class _MotionCheck:
+    """Validity of hand configurations during an object motion that starts at ``state``: joint
+    limits, and collisions with the contact links (``busy``) allowed to touch the object and the
+    overlaps present at the start allowed to persist (:meth:`CollisionModel.start_allowance`)."""
+
+    model: CollisionModel
+    touching: list[list[BodyRef]]  # per finger
+    allow: list[Array]  # per finger
+    limits: list[tuple[Array, Array]]  # per finger
+
+    @classmethod
+    def of(cls, model: CollisionModel, state: GraspState, busy: Sequence[int]) -> _MotionCheck:
+        hand = model.hand
+        refs = [hand.resolve_body(state.contacts[i].body) for i in busy]
+        F = range(len(hand.fingers))
+        return cls(model, [[b for b in refs if b is not None and b.finger == f] for f in F],
+                   [model.start_allowance(f, state.q, state.position, state.rotation) for f in F],
+                   [joint_limits(hand, f) for f in F])
+
+    def __call__(self, q: Array, position: Array, rotation: Array) -> bool:
+        hand = self.model.hand
+        for f in range(len(hand.fingers)):
+            qf = q[hand.finger_slice(f)]
+            if np.any(qf < self.limits[f][0] - 1e-9) or np.any(qf > self.limits[f][1] + 1e-9):
+                return False
+            if self.model.finger_clearance(f, q, position, rotation, self.touching[f], self.allow[f]) < -1e-9:
+                return False
+        return True
+
+
 def integrate_object_motion(
     model: CollisionModel,
     state: GraspState,
@@ -865,9 +896,7 @@ def integrate_object_motion(
     q = state.q.copy()
     qs, poses = [q.copy()], [state.pose_vector()]
     worst_res = 0.0
-    busy = [hand.resolve_body(state.contacts[i].body) for i in (*sticking, *separating, *sliding)]
-    allow = [model.start_allowance(f, state.q, state.position, state.rotation) for f in range(len(hand.fingers))]
-    limits = [joint_limits(hand, f) for f in range(len(hand.fingers))]
+    valid = _MotionCheck.of(model, state, (*sticking, *separating, *sliding))
     for _ in range(steps):
         if man is None:
             cur = moved(cur, h * dr)
@@ -885,13 +914,8 @@ def integrate_object_motion(
         poses.append(cur.pose_vector())
         if not check_path and len(qs) <= steps:
             continue
-        for f in range(len(hand.fingers)):
-            touching = [b for b in busy if b is not None and b.finger == f]
-            qf = q[hand.finger_slice(f)]
-            if np.any(qf < limits[f][0] - 1e-9) or np.any(qf > limits[f][1] + 1e-9):
-                return None
-            if model.finger_clearance(f, q, cur.position, cur.rotation, touching, allow[f]) < -1e-9:
-                return None
+        if not valid(q, cur.position, cur.rotation):
+            return None
     seps = []
     for i in separating:
         c = state.contacts[i]
@@ -1111,21 +1135,11 @@ def plan_object_motion(
     q0, q1 = state.q, goal.q_path[-1]
     s1 = pose_displacement(state, goal.pose_path[-1])
     x0, x1 = np.concatenate([q0, np.zeros(D)]), np.concatenate([q1, s1])
-    busy = [hand.resolve_body(state.contacts[i].body) for i in (*sticking, *separating, *sliding)]
-    allow = [model.start_allowance(f, state.q, state.position, state.rotation) for f in range(len(hand.fingers))]
-    limits = [joint_limits(hand, f) for f in range(len(hand.fingers))]
-    touching = [[b for b in busy if b is not None and b.finger == f] for f in range(len(hand.fingers))]
+    check = _MotionCheck.of(model, state, (*sticking, *separating, *sliding))
+    limits = check.limits
 
     def valid(x: Array) -> bool:
-        q = x[:M]
-        pos, R = man.pose(x[M:])
-        for f in range(len(hand.fingers)):
-            qf = q[hand.finger_slice(f)]
-            if np.any(qf < limits[f][0] - 1e-9) or np.any(qf > limits[f][1] + 1e-9):
-                return False
-            if model.finger_clearance(f, q, pos, R, touching[f], allow[f]) < -1e-9:
-                return False
-        return True
+        return check(x[:M], *man.pose(x[M:]))
 
     if man.rows == 0 or not valid(x0) or not valid(x1):
         return None
