@@ -92,13 +92,14 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
 
 
 def _manifold_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
-    """Every waypoint of an object motion lies on the contact manifold of its F-points (body point =
-    object point) and S/N-points (touching), eq. (7) to every order, within 1e-6."""
+    """Every waypoint of an object motion lies on the contact manifold of its kept contacts (body
+    point = object point) and of its sliding ones (touching), eq. (7) to every order, within 1e-6.
+    The sliding contacts are the step's ``sliding_contacts``, as the planner followed them."""
     from planner.ompl_paths import ContactManifold, pose_displacement
 
     t = step.transition
-    sticking = [i for i, ch in enumerate(t.combination) if ch == "F"]
-    sliding = [i for i, ch in enumerate(t.combination) if ch in "SN"]
+    sliding = [int(i) for i in t.figures.get("sliding_contacts", [])]
+    sticking = [i for i, ch in enumerate(t.combination) if ch != "D" and i not in sliding]
     try:
         man = ContactManifold(hand, step.before, sticking, sliding, scene)
     except CTPError as e:
