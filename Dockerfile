@@ -12,7 +12,9 @@ WORKDIR /app
 COPY pyproject.toml README.md ./
 COPY analysis ./analysis
 COPY planner ./planner
+COPY sim ./sim
 COPY api ./api
+COPY ctp ./ctp
 COPY examples ./examples
 RUN pip install . \
     && useradd --create-home --uid 10001 ctp \

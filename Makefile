@@ -23,7 +23,7 @@ run: install
 	$(VENV)/bin/uvicorn api.main:app --host 127.0.0.1 --port 8000
 
 lint: install
-	$(PY) -m ruff check analysis planner api tests benchmarks
+	$(PY) -m ruff check analysis planner sim api ctp tests benchmarks examples
 	$(PY) -m mypy
 
 # The whole suite, slow tests included (CI runs exactly this).

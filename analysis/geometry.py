@@ -7,6 +7,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from analysis._types import Array
+from analysis.exceptions import SceneError
 from analysis.kinematics import BodyRef, HandKinematics, segment_distance
 from analysis.rotations import quat_wxyz_to_matrix, rotz
 
@@ -81,3 +82,19 @@ def body_surface_distance(scene: Scene, hand: HandKinematics, ref: BodyRef, p: A
         return shape_signed_distance(body.shape, np.asarray(p, dtype=float), scene.dim)
     a, b = hand.body_segment(ref, hand.q0)
     return segment_distance(np.asarray(p, dtype=float), a, b) - hand.body_radius(ref)
+
+
+def object_size(scene: Scene) -> float:
+    """Characteristic size ``s`` of the object (radius, half-diagonal, ...), scene units."""
+    from analysis.scene import Box, Cylinder, Disk, Polygon, Sphere
+
+    shape = scene.object.shape
+    if isinstance(shape, Disk | Sphere):
+        return float(shape.radius)
+    if isinstance(shape, Box):
+        return 0.5 * float(np.linalg.norm(shape.size))
+    if isinstance(shape, Polygon):
+        return float(np.max(np.linalg.norm(np.asarray(shape.vertices, dtype=float), axis=1)))
+    if isinstance(shape, Cylinder):
+        return float(max(shape.radius, 0.5 * shape.height))
+    raise SceneError(("object", "shape", "type"), f"no characteristic size for '{shape.type}' objects")

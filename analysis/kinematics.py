@@ -223,6 +223,11 @@ class HandKinematics:
                     return None if k is None else BodyRef(name=name, finger=i, link=k)
         return None
 
+    def finger_of(self, name: str) -> int | None:
+        """Index of the finger that carries body ``name``; None for a fixed or unknown body."""
+        ref = self.resolve_body(name)
+        return None if ref is None else ref.finger
+
     def finger_slice(self, i: int) -> slice:
         return slice(int(self.offsets[i]), int(self.offsets[i + 1]))
 

@@ -125,7 +125,7 @@ class ContactStateGraph:
     validated: set[Any] = field(default_factory=set)
 
     def __post_init__(self) -> None:
-        from analysis.simulate import object_size
+        from analysis.geometry import object_size
 
         self.size = object_size(self.scene)
         self.model = CollisionModel.of(self.scene, self.hand)

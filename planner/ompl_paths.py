@@ -233,7 +233,7 @@ class CollisionModel:
         """The model of a scene. Fingers whose capsules already overlap in the scene as given are
         taken to move in different layers (a planar hand's fingers stacked in depth, as in the
         paper's Fig. 1) and are not checked against each other; all other pairs are."""
-        from analysis.simulate import object_size
+        from analysis.geometry import object_size
 
         r = 0.01 * object_size(scene) if min_radius is None else min_radius
         everyone = frozenset((i, j) for i in range(len(hand.fingers)) for j in range(i + 1, len(hand.fingers)))

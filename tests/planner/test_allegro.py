@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES
+from closure_helpers import EXAMPLES
 
 from analysis.kinematics import HandKinematics
 from analysis.scene import load_scene

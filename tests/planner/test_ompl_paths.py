@@ -168,7 +168,7 @@ def test_contact_manifold_jacobian_and_tangent_space(planar_scene: Scene, planar
 
 def test_spatial_manifold_jacobian_matches_finite_differences() -> None:
     """The 3-D rotation part: d(exp(w) y)/dw = -[exp(w) y]x J_l(w), at random w."""
-    from conftest import EXAMPLES
+    from closure_helpers import EXAMPLES
 
     from analysis.scene import load_scene
     from planner.ompl_paths import ContactManifold

@@ -11,9 +11,9 @@ from analysis.kinematics import HandKinematics
 from analysis.scene import Box, Scene
 from planner import Goal, plan
 from planner.ompl_paths import ContactManifold
-from planner.replay import replay_plan
 from planner.state import state_from_scene
 from planner.verify import verify_plan
+from sim.step_replay import replay_plan
 
 
 def test_sliding_rows_jacobian_matches_finite_differences(planar_scene: Scene) -> None:
@@ -82,8 +82,8 @@ def test_sliding_steps_replay_in_mujoco(planar_scene: Scene, slide_plan) -> None
     assert not r.dropped
     assert all(s.ok for s in r.steps), [s.note for s in r.steps if not s.ok]
     assert r.relative_error <= 0.05
-    from analysis.simulate import simulate_torques
     from planner.state import state_scene
+    from sim.torque_replay import simulate_torques
 
     step = next(s for s in slide_plan.steps if "S" in s.transition.combination)
     t = step.transition
@@ -99,7 +99,7 @@ def test_sliding_steps_replay_in_mujoco(planar_scene: Scene, slide_plan) -> None
 def test_sliding_plan_replays_continuously(planar_scene: Scene, slide_plan) -> None:  # type: ignore[no-untyped-def]
     """The whole pose plan (regrasps, then six sliding motions) in one MuJoCo run ends within 5 %
     of the planned displacement and never drops the disk."""
-    from planner.simulate_plan import simulate_plan
+    from sim.plan_replay import simulate_plan
 
     r = simulate_plan(planar_scene, slide_plan)
     assert not r.dropped, r.drop_reason

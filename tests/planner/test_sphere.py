@@ -6,14 +6,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import EXAMPLES
+from closure_helpers import EXAMPLES
 
+from analysis.geometry import object_size
 from analysis.scene import load_scene
-from analysis.simulate import object_size
 from planner import Goal, plan
-from planner.replay import replay_plan
-from planner.simulate_plan import simulate_plan
 from planner.verify import verify_plan
+from sim.plan_replay import simulate_plan
+from sim.step_replay import replay_plan
 
 
 @pytest.mark.slow

@@ -1,4 +1,4 @@
-"""Helpers of the service tests (a uniquely named module: tests/planner has a conftest.py too)."""
+"""Helpers of the service tests (on the path through pytest's `pythonpath`: tests/helpers)."""
 
 from __future__ import annotations
 

@@ -256,9 +256,9 @@ def _plan_scene(plan_path: Path, data: dict[str, Any], scene_path: Path | None) 
 
 def _simulate_plan_file(plan_path: Path, data: dict[str, Any], scene_path: Path | None,
                         json_out: Path | None) -> None:
-    """``ctp simulate PLAN.json``: the continuous replay of :func:`planner.simulate_plan.simulate_plan`.
+    """``ctp simulate PLAN.json``: the continuous replay of :func:`sim.plan_replay.simulate_plan`.
     Exit code 0 with the report, 1 if the object was dropped, 2 for bad input."""
-    from planner.simulate_plan import simulate_plan
+    from sim.plan_replay import simulate_plan
 
     sc = _plan_scene(plan_path, data, scene_path)
     try:
@@ -311,7 +311,7 @@ def simulate(
     the plan's (exit code 1 if the object was dropped)."""
     from analysis.combination import analyze_combination
     from analysis.contacts import build_system
-    from analysis.simulate import format_report, simulate_torques
+    from sim.torque_replay import format_report, simulate_torques
 
     plan_data = _read_plan_file(scene)
     if plan_data is not None:
@@ -341,7 +341,7 @@ def simulate(
                           f"predicted direction {_fmt(predicted)}")
         else:
             _fail("torque: give --torque or --combination")
-        from analysis.simulate import object_size
+        from analysis.geometry import object_size
 
         result = simulate_torques(sc, tau, duration=duration, combination=combination,
                                   stop_distance=stop_fraction * object_size(sc) if stop_fraction > 0 else None)
@@ -417,7 +417,7 @@ def plan(
     data = result.to_json()
     data["scene"] = sc.model_dump(mode="json", exclude_none=True)  # 'ctp simulate PLAN.json' reloads it
     if replay and result.found:
-        from planner.simulate_plan import simulate_plan
+        from sim.plan_replay import simulate_plan
 
         try:
             rep = simulate_plan(sc, result)
@@ -435,7 +435,7 @@ def plan(
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True, "help_option_names": []})
 def batch(ctx: typer.Context) -> None:
     """Plan (--goal) or enumerate (--enumerate) every scene of a folder; resumable; processes or Ray."""
-    from api.batch import main as batch_main  # the service package owns it (api imports analysis)
+    from ctp.batch import main as batch_main  # the service package owns it (api imports analysis)
 
     batch_main(ctx.args)
 

@@ -143,7 +143,7 @@ from numpy.typing import NDArray
 
 from analysis._types import Array
 from analysis.exceptions import SceneError
-from analysis.geometry import object_origin, object_rotation
+from analysis.geometry import object_origin, object_rotation, object_size
 from analysis.kinematics import FingerModel, HandKinematics
 from analysis.rotations import matrix_to_quat_wxyz, matrix_to_rotvec
 
@@ -245,22 +245,6 @@ def damping(scene: Scene, tau: Array | None = None, params: SimulationParams = D
         link_mass=link_mass,
         link_inertia=link_mass * (0.1 * s) ** 2,
     )
-
-
-def object_size(scene: Scene) -> float:
-    """Characteristic size ``s`` of the object (radius, half-diagonal, ...), scene units."""
-    from analysis.scene import Box, Cylinder, Disk, Polygon, Sphere
-
-    shape = scene.object.shape
-    if isinstance(shape, Disk | Sphere):
-        return float(shape.radius)
-    if isinstance(shape, Box):
-        return 0.5 * float(np.linalg.norm(shape.size))
-    if isinstance(shape, Polygon):
-        return float(np.max(np.linalg.norm(np.asarray(shape.vertices, dtype=float), axis=1)))
-    if isinstance(shape, Cylinder):
-        return float(max(shape.radius, 0.5 * shape.height))
-    raise SceneError(("object", "shape", "type"), f"simulation does not support '{shape.type}' objects")
 
 
 # --------------------------------------------------------------------------------------------
@@ -1187,7 +1171,6 @@ __all__ = [
     "joint_name",
     "link_body_name",
     "link_site_names",
-    "object_size",
     "reset_to_scene",
     "simulate_torques",
 ]

@@ -24,7 +24,9 @@ from analysis.exceptions import CombinationError, SceneError
 from analysis.friction import friction_set
 from analysis.kinematics import HandKinematics
 from analysis.scene import Scene, load_scene, scene_from_dict
-from analysis.simulate import (
+from analysis.statics import statics
+from analysis.stationary import stationary_grasp
+from sim.torque_replay import (
     DEFAULT_PARAMS,
     build_mjcf,
     build_model,
@@ -38,8 +40,6 @@ from analysis.simulate import (
     reset_to_scene,
     simulate_torques,
 )
-from analysis.statics import statics
-from analysis.stationary import stationary_grasp
 
 EXAMPLES = Path(__file__).parents[2] / "examples"
 PLANAR = EXAMPLES / "planar_disk_envelope.json"

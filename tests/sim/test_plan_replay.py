@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from analysis.cli import app
+from analysis.geometry import object_size
 from analysis.scene import Scene
-from analysis.simulate import object_size
-from planner.replay import replay_plan
-from planner.simulate_plan import simulate_plan
+from ctp.cli import app
+from sim.plan_replay import simulate_plan
+from sim.step_replay import replay_plan
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -31,7 +31,7 @@ def test_planar_plan_replays_in_mujoco(planar_scene: Scene, planar_plan) -> None
 
 
 # --------------------------------------------------------------------------------------------
-# Continuous replay of the whole plan (planner.simulate_plan): one simulation, never reset
+# Continuous replay of the whole plan (sim.plan_replay): one simulation, never reset
 
 
 @pytest.fixture(scope="module")
@@ -144,7 +144,7 @@ def test_final_holding_torque_rebuilt_from_the_file_equals_the_planners(planar_s
     """For plan files without ``final_holding_torque`` the final grasp is rebuilt from the file
     (points, bodies, object-surface normals): its tau_st (18) is the planner's."""
     from analysis.kinematics import HandKinematics
-    from planner.simulate_plan import final_holding_torque, parse_plan
+    from sim.plan_replay import final_holding_torque, parse_plan
 
     hand = HandKinematics.from_scene(planar_scene)
     steps = parse_plan(planar_plan.to_json(), planar_scene, hand)

@@ -15,8 +15,9 @@ import pytest
 
 from analysis.combination import analyze_combination
 from analysis.contacts import build_system
+from analysis.geometry import object_size
 from analysis.scene import load_scene
-from analysis.simulate import object_size, simulate_torques
+from sim.torque_replay import simulate_torques
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 COSINE_MIN = 0.9

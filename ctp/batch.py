@@ -224,7 +224,7 @@ batch_app.command()(batch)
 
 
 def main(args: list[str]) -> None:
-    """Entry of ``ctp batch`` (registered lazily in :mod:`analysis.cli`)."""
+    """Entry of ``ctp batch`` (registered lazily in :mod:`ctp.cli`)."""
     command = typer.main.get_command(batch_app)
     try:
         command.main(args=list(args), prog_name="ctp batch", standalone_mode=True)

@@ -10,10 +10,10 @@ import pytest
 from service_helpers import EXAMPLES
 from typer.testing import CliRunner
 
-from analysis.cli import app
 from analysis.contacts import build_system
 from analysis.enumerate import enumerate_combinations
 from analysis.scene import load_scene
+from ctp.cli import app
 
 runner = CliRunner()
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from analysis.cli import app
 from analysis.scene import load_scene, scene_from_dict
+from ctp.cli import app
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

@@ -1,3 +1,6 @@
+"""Session fixtures shared by the planner, sim and ctp tests (loaded with ``-p plan_fixtures``): the
+planar example scene and its plans, computed once per run."""
+
 from __future__ import annotations
 
 from pathlib import Path

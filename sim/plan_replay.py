@@ -4,18 +4,18 @@
 the hand start at rest at the scene's configuration and are never reset, so whatever an earlier
 step leaves behind (creep of the object during a regrasp, overshoot of an object motion, a new
 contact's slight penetration) is carried into the later steps and into the final pose. (The
-step-by-step check :func:`planner.replay.replay_plan` restarts every step from its planned
+step-by-step check :func:`sim.step_replay.replay_plan` restarts every step from its planned
 state instead.)
 
 Model
 -----
-One model, :func:`analysis.simulate.build_model` of the start scene, with the quasi-static
-parameters of :mod:`analysis.simulate` (``DEFAULT_PARAMS``; object damping equal in every
-pose coordinate, light finger damping, small masses, see :func:`analysis.simulate.damping`).
+One model, :func:`sim.torque_replay.build_model` of the start scene, with the quasi-static
+parameters of :mod:`sim.torque_replay` (``DEFAULT_PARAMS``; object damping equal in every
+pose coordinate, light finger damping, small masses, see :func:`sim.torque_replay.damping`).
 Every link of every finger and every fixed body has a contact pair with the object, so the
 contacts a plan makes later are simulated like the scene's own. The force scale (the ``tau``
 argument of ``build_model``) is that of the **largest torque anywhere in the plan** (the
-stationary and chosen torques of all steps, by max-norm, as :func:`analysis.simulate.force_scale`
+stationary and chosen torques of all steps, by max-norm, as :func:`sim.torque_replay.force_scale`
 reads it): damping, masses and contact stiffness are fixed for the whole run, so they are sized
 for the strongest load (the object motion's member of T, eq. 32); under the smaller holding
 torques the object is then only more heavily damped, which slows creep and does not change any
@@ -43,7 +43,7 @@ At every moment each finger is either
 Steps (``kind`` of :class:`planner.graph.Transition`)
 -----------------------------------------------------
 Start: torques and the scene's external wrench rise together from zero (the smooth ramp
-``3x^2 - 2x^3`` of ``analysis.simulate._ramp`` over ``params.ramp_time``) to the first step's
+``3x^2 - 2x^3`` of ``sim.torque_replay._ramp`` over ``params.ramp_time``) to the first step's
 stationary torque ``tau_st`` (18), then settle. Every later change of torque is the same smooth
 ramp from the torque in force to the new one. Each step first ramps to its own
 ``torques.stationary`` (a no-op when the previous step already ends there, which is the usual
@@ -59,7 +59,7 @@ case).
 * ``object_motion`` (30-32): ramp to ``torques.chosen`` (a member of T, eq. 32) and run until
   the object has moved from its pose at the start of the step by the planned distance
   ``|object_path[-1] - object_path[0]|`` (norm of the displacement ``dr`` of
-  :func:`analysis.simulate.simulate_torques`: ``(dx, dy, dtheta)`` or ``(dp, w)``); the ramp
+  :func:`sim.torque_replay.simulate_torques`: ``(dx, dy, dtheta)`` or ``(dp, w)``); the ramp
   back to the holding torque starts ``v T / 2`` before that distance (``v`` the current speed of
   ``|dr|``, ``T`` the ramp time), which is how far a quasi-static object still travels while the
   excess torque ramps down, so the object comes to rest near the planned distance rather than
@@ -86,7 +86,7 @@ Monitoring and report
 Every MuJoCo step the object's pose is compared with the planned object path of the moment (the
 constant pose of a regrasp step, the polyline ``object_path`` of an object motion) in the
 metric ``|dp| + s |dtheta|`` of ``simulate_torques`` (``s`` the object size,
-:func:`analysis.simulate.object_size`). The object is **dropped** when that deviation exceeds
+:func:`analysis.geometry.object_size`). The object is **dropped** when that deviation exceeds
 ``params.drop_rel * s``, when no contact pushes on the object for ``unloaded_time`` while some
 load is applied (a torque or the external wrench is non-zero), or when the state stops being
 finite. The run stops at a drop. Displacements are pose-vector differences
@@ -109,10 +109,11 @@ from numpy.typing import NDArray
 
 from analysis._types import Array
 from analysis.exceptions import SceneError
+from analysis.geometry import object_size
 from analysis.kinematics import HandKinematics
 from analysis.rotations import matrix_to_quat_wxyz, matrix_to_rotvec, rotvec_to_matrix
 from analysis.scene import Scene
-from analysis.simulate import (
+from sim.torque_replay import (
     DEFAULT_PARAMS,
     OBJECT_BODY,
     OBJECT_GEOM,
@@ -122,7 +123,6 @@ from analysis.simulate import (
     finger_dof_addresses,
     finger_qpos_addresses,
     force_scale,
-    object_size,
     reset_to_scene,
 )
 
@@ -447,7 +447,7 @@ class _Run:
         return R.reshape(3, 3)
 
     def dr_from(self, pose0: Array, R0: Array) -> Array:
-        """Displacement ``dr`` ``(D,)`` since ``pose0`` as ``analysis.simulate._object_dr`` defines it."""
+        """Displacement ``dr`` ``(D,)`` since ``pose0`` as ``sim.torque_replay._object_dr`` defines it."""
         pose = self.pose()
         if self.dim == 2:
             return pose - pose0

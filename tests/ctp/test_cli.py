@@ -1,4 +1,4 @@
-"""``ctp analyze`` and ``ctp schema`` (typer CliRunner on analysis.cli.app)."""
+"""``ctp analyze`` and ``ctp schema`` (typer CliRunner on ctp.cli.app)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 from closure_helpers import PLANAR, example_system
 from typer.testing import CliRunner
 
-from analysis.cli import app
 from analysis.combination import CombinationParts, summarize
 from analysis.enumerate import enumerate_combinations
+from ctp.cli import app
 
 runner = CliRunner()
 

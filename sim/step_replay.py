@@ -1,5 +1,5 @@
 """Step-by-step MuJoCo replay of a plan (physics cross-check), built on
-:func:`analysis.simulate.simulate_torques`.
+:func:`sim.torque_replay.simulate_torques`.
 
 Each step is replayed from its own planned state (the scene of the state before the step, at rest):
 
@@ -14,7 +14,7 @@ Each step is replayed from its own planned state (the scene of the state before 
 The object's total displacement is the sum of the steps' displacements, compared with the plan's.
 ``simulate_torques`` restarts from a scene, so the steps are chained through the planned states,
 not through the simulated ones: this checks every step's physics, not the drift of a whole run.
-The whole run, one simulation through every step, is :func:`planner.simulate_plan.simulate_plan`.
+The whole run, one simulation through every step, is :func:`sim.plan_replay.simulate_plan`.
 """
 
 from __future__ import annotations
@@ -24,11 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis._types import Array
+from analysis.geometry import object_size
 from analysis.kinematics import HandKinematics
 from analysis.scene import Scene
-from analysis.simulate import object_size, simulate_torques
 from planner.plan import Plan
 from planner.state import StateAnalysis, all_f, state_scene
+from sim.torque_replay import simulate_torques
 
 
 @dataclass(frozen=True)
