@@ -17,12 +17,12 @@ from analysis.contacts import GraspSystem, Selection, selection
 from analysis.dafc import SEMANTICS, DAFCOracle, DAFCSet, DirectionTest, dafc_nonempty, dafc_set
 from analysis.dpfc import DPFC, dpfc
 from analysis.exceptions import CTPError, NoStationaryGrasp
-from analysis.friction import FrictionSet, friction_set
+from analysis.friction import FrictionSet, friction_set, kinetic_friction
 from analysis.motion import MotionSpace, motion_space
 from analysis.regrasp import RegraspCone, regrasp_cone
 from analysis.statics import Statics, statics
-from analysis.stationary import StationaryGrasp, stationary_grasps
-from analysis.torques import FrictionUncertainty, TorqueSet, friction_uncertainty, torque_set
+from analysis.stationary import StationaryGrasp, min_total_normal, stationary_grasps
+from analysis.torques import FrictionUncertainty, TorqueSet, friction_uncertainty, realisable_direction, torque_set
 
 
 @dataclass(frozen=True)
@@ -80,8 +80,6 @@ def summarize(parts: CombinationParts, stationary_known: bool | None = None) -> 
     if ms.a_bar == 0:
         return CombinationSummary(c, False, "object cannot move (a~ = 0)", ms.a, 0, 0, p, True, None)
     if stationary_known is None:
-        from analysis.stationary import min_total_normal
-
         stationary_known = min_total_normal(sy, st, fs) is not None
     if not stationary_known:
         return CombinationSummary(c, False, "no stationary grasp (18)", ms.a, ms.a_bar, 0, p, True, None)
@@ -197,15 +195,11 @@ def _realisable_candidates(
     first; then a direction from the NLP that makes the net wrench parallel to the motion
     (:func:`analysis.torques.realisable_direction`); then sampled DAFC members, bounded work first.
     """
-    from analysis.torques import realisable_direction
-
     out: list[Array] = []
     t = oracle.test(target)
     if t.member and t.forces is not None and t.zeta_c is not None:
         W = parts.st.G_c
         if parts.sel.s_index:
-            from analysis.friction import kinetic_friction
-
             W = W + kinetic_friction(parts.system, parts.sel, oracle.slips_of(t.zeta_c)).G_w
         w = W @ t.forces + parts.system.w_ex
         k = parts.ms.Lambda_r_t @ (parts.ms.Lambda_r_t.T @ w)

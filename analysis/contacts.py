@@ -9,21 +9,19 @@ D about to detach) to get ``H_c, H_s, H_d`` and ``A_c = H_c A``, ``A_s = H_s A``
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import TYPE_CHECKING
 
 import numpy as np
 from numpy.typing import NDArray
 
 from analysis._types import Array
 from analysis.exceptions import CombinationError
+from analysis.friction_cone import friction_pyramid
 from analysis.geometry import object_origin
 from analysis.kinematics import BodyRef, HandKinematics
-
-if TYPE_CHECKING:
-    from analysis.scene import Scene
-
+from analysis.scene import Scene
 
 STATES = "FNSD"
 
@@ -121,15 +119,13 @@ class GraspSystem:
     def pyramid(self) -> tuple[Array, Array]:
         """Per contact, the facet normals ``(L, k', d)`` and generators ``(L, k', d)`` of its
         friction cone (2-D: the two edges, exact; 3-D: the inscribed ``k``-sided pyramid), see
-        :mod:`analysis.friction`. Computed once per configuration."""
-        from analysis.friction import _pyramid
-
+        :mod:`analysis.friction_cone`. Computed once per configuration."""
         L, d, k = self.L, self.d, self.friction_sides
         kk = 2 if d == 2 else k
         facets = np.zeros((L, kk, d))
         gens = np.zeros((L, kk, d))
         for i in range(L):
-            facets[i], gens[i] = _pyramid(self.normals[i], self.tangents[i], self.mu[i], d, k)
+            facets[i], gens[i] = friction_pyramid(self.normals[i], self.tangents[i], self.mu[i], d, k)
         return facets, gens
 
     def frictional(self) -> NDArray[np.bool_]:
@@ -233,8 +229,6 @@ def parse_combination(combination: str, system: GraspSystem) -> str:
 
 def all_combinations(system: GraspSystem) -> list[str]:
     """Every combination: F/S/D for frictional contacts, N/D for frictionless ones."""
-    import itertools
-
     letters = ["FSD" if m > 0 else "ND" for m in system.mu]
     return ["".join(p) for p in itertools.product(*letters)]
 

@@ -30,8 +30,9 @@ from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
 from analysis.exceptions import SolverError
 from analysis.friction import FrictionSet, kinetic_friction
+from analysis.linalg import null_space, rank
 from analysis.motion import MotionSpace
-from analysis.solvers.cdd import Generators, cone_generators
+from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators
 from analysis.solvers.highs import LPModel, solve_lp
 from analysis.statics import Statics
 
@@ -235,6 +236,39 @@ class DAFCOracle:
             return None
         return res.x if res.found else None
 
+    def realisable(self, t: DirectionTest) -> bool:
+        """Has the member ``t`` a non-empty torque set (32) for its tested motion ``t.zeta_c``?
+
+        DAFC (22) has no ``W_3`` condition; T also asks the net wrench in the motion space to be
+        parallel to the motion (``N_u^T Lambda~_r^T w = 0``) with positive work. With the slips
+        of ``t.zeta_c`` fixed this is one LP in ``f_c`` (the same as :mod:`analysis.torques`).
+        A member can fail it robustly (SSSSS, or DDSSS away from the realisable sub-cone), so
+        the example direction of a combination prefers members that pass it.
+        """
+        if not t.member or t.zeta_c is None:
+            return False
+        sy, st, ms, u = self.system, self.st, self.ms, t.u
+        G_eff = st.G_c
+        if self.sel.s_index:
+            G_eff = st.G_c + kinetic_friction(sy, self.sel, self.slips_of(t.zeta_c)).G_w
+        N_u = null_space(u[None, :]) if ms.a_bar > 1 else np.zeros((ms.a_bar, 0))
+        E = np.vstack([self.Xi.T, N_u.T @ ms.Lambda_r_t.T])  # (p + a_bar - 1, D): E w = 0
+        work_row = u @ ms.Lambda_r_t.T @ G_eff
+        work0 = float(u @ ms.Lambda_r_t.T @ sy.w_ex)
+        tol = WORK_TOL * (1.0 + float(np.linalg.norm(sy.w_ex)))
+        if G_eff.shape[1] == 0:
+            return bool(work0 > tol and np.all(np.abs(E @ sy.w_ex) <= tol))
+        try:
+            res = solve_lp(work_row, A_ub=np.vstack([self.fs.C, -work_row[None, :]]),
+                           b_ub=np.r_[np.zeros(self.fs.C.shape[0]), work0], A_eq=E @ G_eff, b_eq=-(E @ sy.w_ex),
+                           maximize=True)
+        except SolverError:
+            return False  # undecided: only a preference among members hangs on it
+        self.lp_count += 1
+        if res.status == "unbounded":
+            return True
+        return bool(res.found and res.objective is not None and res.objective + work0 > tol)
+
     # -- membership -----------------------------------------------------------------------------
 
     def test(
@@ -406,9 +440,6 @@ def dafc_exact(oracle: DAFCOracle) -> DAFCExact | None:
     """The exact description of DAFC (see :class:`DAFCExact`), or ``None`` with S-points (whose
     friction direction varies with the motion) or when ``Q`` has dimension above
     ``MAX_EXACT_DIM`` (vertex enumeration by cdd would be too large)."""
-    from analysis.linalg import rank
-    from analysis.solvers.cdd import polyhedron_generators
-
     ms, st, fs, sy = oracle.ms, oracle.st, oracle.fs, oracle.system
     if oracle.sel.s_index or ms.a_bar == 0:
         return None
@@ -451,6 +482,19 @@ def _dedupe(U: Array) -> Array:
     return np.array(out).reshape(-1, U.shape[1] if U.ndim == 2 else 0)
 
 
+def _prefer_realisable(oracle: DAFCOracle, dirs: list[Array], **test_options: bool) -> DirectionTest | None:
+    """Test the coordinates ``dirs`` in order; the first member whose torque set (32) is
+    non-empty (:meth:`DAFCOracle.realisable`), else the first member, else None."""
+    first: DirectionTest | None = None
+    for u in dirs:
+        t = oracle.test(oracle.ms.Lambda_r_t @ u, **test_options)
+        if t.member:
+            if oracle.realisable(t):
+                return t
+            first = first or t
+    return first
+
+
 def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[DirectionTest | None, int, bool]:
     """Decide whether DAFC is empty; return (a member or None, dim DAFC, exact).
 
@@ -464,6 +508,12 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     LP data vary continuously), so DAFC then has the dimension of ``A_r``; a member found only on
     the boundary gives the rank of the members. These answers are marked ``exact = False`` (a
     local search over slips and redundancy).
+
+    The returned member (the combination's example direction) is, within each stage, the first
+    one whose torque set (32) is non-empty (:meth:`DAFCOracle.realisable`), else the first
+    member: the samples live in the coordinates of ``Lambda~_r``, whose column signs are LAPACK's
+    choice, so "the first member" alone may be a direction with no W_3-admissible forces on one
+    machine and a realisable one on another.
     """
     ms = oracle.ms
     if ms.a_bar == 0:
@@ -477,11 +527,8 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     if not oracle.sel.s_index or (oracle.exact and ms.a_bar == 1):
         # without S-points: A_r minus a convex cone, decided on the generators; with a_bar = 1 the
         # only directions are the (at most two) generators, each decided by the exact oracle
-        for u in generators:
-            t = oracle.test(ms.Lambda_r_t @ u, witness=False)
-            if t.member:
-                return t, cone_dim, True
-        return None, 0, True
+        t = _prefer_realisable(oracle, generators, witness=False)
+        return (t, cone_dim, True) if t is not None else (None, 0, True)
     # (0) the centroid of the cone (the likeliest member), then seeded interior samples
     rng = np.random.default_rng(1)
     interior: list[Array] = []
@@ -492,27 +539,29 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
         v = rng.random(len(dirs)) @ dirs
         if np.linalg.norm(v) > 1e-9:
             interior.append(v / np.linalg.norm(v))
-    for u in interior:
-        t = oracle.test(ms.Lambda_r_t @ u, screen=False, quick=True, witness=False)
-        if t.member:
-            return t, cone_dim, False
+    t = _prefer_realisable(oracle, interior, screen=False, quick=True, witness=False)
+    if t is not None:
+        return t, cone_dim, False
     # (1) relaxation: exact emptiness certificate
     scale = 1.0 + float(np.linalg.norm(oracle.system.w_ex))
     positive = [u for u in generators if oracle.relaxed_work_sup(ms.Lambda_r_t @ u) > WORK_TOL * scale]
     if not positive:
         return None, 0, True
     # (2) the interior samples again with the full redundancy search, then the generators
-    for u in interior:
-        t = oracle.test(ms.Lambda_r_t @ u, screen=False, witness=False)
-        if t.member:
-            return t, cone_dim, False
+    t = _prefer_realisable(oracle, interior, screen=False, witness=False)
+    if t is not None:
+        return t, cone_dim, False
     members: list[Array] = []
     best: DirectionTest | None = None
+    best_ok = False
     for u in positive:
         t = oracle.test(ms.Lambda_r_t @ u, screen=False, witness=False)
         if t.member:
             members.append(t.u)
-            best = best or t
+            if not best_ok:
+                ok = oracle.realisable(t)
+                if best is None or ok:
+                    best, best_ok = t, ok
     if best is None:
         return None, 0, False
     return best, int(np.linalg.matrix_rank(np.array(members), tol=1e-6)), False

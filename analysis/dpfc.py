@@ -17,6 +17,7 @@ from analysis._types import Array
 from analysis.friction import FrictionSet
 from analysis.linalg import rank
 from analysis.solvers.cdd import Generators, polyhedron_generators, reduce_generators
+from analysis.solvers.highs import solve_lp
 from analysis.statics import Statics
 from analysis.stationary import StationaryGrasp
 
@@ -38,8 +39,6 @@ class DPFC:
 
     def contains(self, w: Array, st: Statics, fs: FrictionSet, grasp: StationaryGrasp) -> bool:
         """Exact membership by LP: ``w = G_c Gamma xi~`` with ``f_st - Gamma xi~`` in ``F_f``."""
-        from analysis.solvers.highs import solve_lp
-
         GG = st.G_c @ st.Gamma  # (D, p_bar)
         res = solve_lp(
             np.zeros(GG.shape[1]),

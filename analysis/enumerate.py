@@ -15,8 +15,10 @@ Pruning, all exact:
 from __future__ import annotations
 
 import itertools
+import multiprocessing as mp
 import os
 from collections.abc import Callable, Iterable
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
@@ -121,9 +123,6 @@ def enumerate_combinations(
         workers = (os.cpu_count() or 1) if len(canonical) > PARALLEL_THRESHOLD else 1
     if workers <= 1:
         return _enumerate_serial(system, canonical, admissible, progress)
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
     ordered = _order(canonical)
     n_chunks = max(workers * 2, 1)
     chunks = [ordered[k::n_chunks] for k in range(n_chunks)]  # interleaved: similar strength mix

@@ -5,9 +5,7 @@ world frame) and the normal component of an S- or N-point (one scalar); D-points
 force. The friction set ``F`` (16) is ``{f_c : C f_c <= 0}``:
 
 * F-point (13): 2-D exactly, ``|t^T f| <= mu n^T f``; 3-D the ``k``-sided pyramid inscribed in
-  the cone (generators ``n + mu (cos phi_j t1 + sin phi_j t2)``, ``phi_j = 2 pi j / k``), whose
-  facets are ``(cos psi_j t1 + sin psi_j t2)^T f <= mu cos(pi/k) n^T f`` with
-  ``psi_j = (2 j + 1) pi / k``;
+  the cone (facets and generators in :mod:`analysis.friction_cone`);
 * N-point and the normal of an S-point (14): ``n_f >= 0``;
 * the tangential force of an S-point (15, 11) is kinetic friction ``t = -mu n_f s`` against the
   unit slip ``s`` of the object relative to the finger; it is linear in ``n_f`` once ``s`` is
@@ -22,6 +20,7 @@ import numpy as np
 
 from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
+from analysis.friction_cone import friction_pyramid
 
 
 @dataclass(frozen=True)
@@ -66,7 +65,7 @@ def friction_set(system: GraspSystem, sel: Selection, mu_scale: float = 1.0) -> 
             elif mu_scale == 1.0:
                 facets, gdirs = system.pyramid[0][i], system.pyramid[1][i]
             else:
-                facets, gdirs = _pyramid(n, system.tangents[i], mu, d, k)
+                facets, gdirs = friction_pyramid(n, system.tangents[i], mu, d, k)
             rows = np.zeros((len(facets), L_c))
             rows[:, sl] = facets / np.linalg.norm(facets, axis=1, keepdims=True)
             gens = np.zeros((len(gdirs), L_c))
@@ -83,18 +82,6 @@ def friction_set(system: GraspSystem, sel: Selection, mu_scale: float = 1.0) -> 
     C = np.vstack(row_blocks) if row_blocks else np.zeros((0, L_c))
     E = np.vstack(gen_blocks).T if gen_blocks else np.zeros((L_c, 0))
     return FrictionSet(C, np.concatenate(owners) if owners else np.zeros(0, dtype=int), E, N)
-
-
-def _pyramid(n: Array, T: Array, mu: float, d: int, k: int) -> tuple[Array, Array]:
-    """Facet normals and generators of the friction cone of one contact (see module docstring)."""
-    if d == 2:
-        return np.array([T[0] - mu * n, -T[0] - mu * n]), np.array([n + mu * T[0], n - mu * T[0]])
-    psi = (2 * np.arange(k) + 1) * np.pi / k
-    phi = 2 * np.arange(k) * np.pi / k
-    c = np.cos(np.pi / k)
-    facets = np.cos(psi)[:, None] * T[0] + np.sin(psi)[:, None] * T[1] - mu * c * n
-    gens = n + mu * (np.cos(phi)[:, None] * T[0] + np.sin(phi)[:, None] * T[1])
-    return facets, gens
 
 
 @dataclass(frozen=True)

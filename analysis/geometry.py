@@ -2,31 +2,29 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from analysis._types import Array
 from analysis.exceptions import SceneError
 from analysis.kinematics import BodyRef, HandKinematics, segment_distance
-from analysis.rotations import quat_wxyz_to_matrix, rotz
+from analysis.pose import Pose
+from analysis.scene import Box, Cylinder, Disk, Polygon, Scene, Segment, Sphere
 
-if TYPE_CHECKING:
-    from analysis.scene import Scene
 
+def object_pose(scene: Scene) -> Pose:
+    """The object's pose at the scene's configuration: ``p_o`` and its rotation."""
+    pose = scene.object.pose
+    return Pose.from_fields(pose.position, scene.dim, angle=pose.angle, quat_wxyz=pose.quat_wxyz)
 
 
 def object_rotation(scene: Scene) -> Array:
     """World rotation ``(3, 3)`` of the object frame."""
-    pose = scene.object.pose
-    if scene.dim == 2:
-        return rotz(pose.angle or 0.0)
-    return quat_wxyz_to_matrix(pose.quat_wxyz or [1.0, 0.0, 0.0, 0.0])
+    return object_pose(scene).rotation
 
 
 def object_origin(scene: Scene) -> Array:
     """``p_o``: where the external wrench acts, ``(d,)``."""
-    return np.asarray(scene.object.pose.position, dtype=float)
+    return object_pose(scene).position
 
 
 def shape_signed_distance(shape: object, p_local: Array, dim: int) -> float | None:
@@ -34,18 +32,12 @@ def shape_signed_distance(shape: object, p_local: Array, dim: int) -> float | No
 
     ``None`` for shapes whose distance is not computed (meshes).
     """
-    from analysis.scene import Box, Cylinder, Disk, Polygon, Segment, Sphere
-
     p = np.asarray(p_local, dtype=float)[:dim]
     if isinstance(shape, Disk | Sphere):
         return float(np.linalg.norm(p) - shape.radius)
     if isinstance(shape, Box):
         c = np.asarray(shape.position if shape.position is not None else np.zeros(dim), dtype=float)
-        h = np.asarray(shape.size, dtype=float) / 2.0
-        q = np.abs(p - c) - h
-        outside = float(np.linalg.norm(np.maximum(q, 0.0)))
-        inside = float(min(np.max(q), 0.0))
-        return outside + inside
+        return float(box_signed_distance(p, c, np.asarray(shape.size, dtype=float) / 2.0))
     if isinstance(shape, Polygon):
         V = np.asarray(shape.vertices, dtype=float)
         worst = -np.inf
@@ -67,6 +59,15 @@ def shape_signed_distance(shape: object, p_local: Array, dim: int) -> float | No
     return None
 
 
+def box_signed_distance(P: Array, center: Array, half_extents: Array) -> Array:
+    """Signed distances ``(...)`` (negative inside) of points ``P`` ``(..., d)``, in the box's
+    frame, to the axis-aligned box of centre ``center`` ``(d,)`` and half-extents ``half_extents``
+    ``(d,)``: ``|max(q, 0)| + min(max_k q_k, 0)`` with ``q = |P - center| - half_extents``."""
+    q = np.abs(P - center) - half_extents  # (..., d)
+    out = np.maximum(q, 0.0)
+    return np.sqrt((out * out).sum(axis=-1)) + np.minimum(q.max(axis=-1), 0.0)
+
+
 def object_signed_distance(scene: Scene, p: Array) -> float | None:
     """Signed distance of the world point ``p`` to the object at its scene pose."""
     R = object_rotation(scene)[: scene.dim, : scene.dim]
@@ -86,8 +87,6 @@ def body_surface_distance(scene: Scene, hand: HandKinematics, ref: BodyRef, p: A
 
 def object_size(scene: Scene) -> float:
     """Characteristic size ``s`` of the object (radius, half-diagonal, ...), scene units."""
-    from analysis.scene import Box, Cylinder, Disk, Polygon, Sphere
-
     shape = scene.object.shape
     if isinstance(shape, Disk | Sphere):
         return float(shape.radius)

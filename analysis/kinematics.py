@@ -12,17 +12,15 @@ All poses are computed in 3-D; a 2-D scene keeps the x and y rows.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from analysis._types import Array
 from analysis.exceptions import SceneError
-from analysis.rotations import axis_angle_matrix, quat_wxyz_to_matrix, rotz
-
-if TYPE_CHECKING:
-    from analysis.scene import Scene
-
+from analysis.pose import Pose
+from analysis.rotations import axis_angle_matrix
+from analysis.scene import Finger2D, Finger3D, FingerURDF, Scene
 
 
 class FingerModel(Protocol):
@@ -126,19 +124,25 @@ class SerialChain:
         return list(range(k + 1))
 
 
+def base_frame(finger: Finger2D | Finger3D) -> tuple[Array, Array]:
+    """World rotation ``(3, 3)`` and origin ``(3,)`` of a finger's base (2-D: in the plane z = 0)."""
+    base = finger.base
+    pose = Pose.from_fields(base.position, len(base.position), angle=getattr(base, "angle", None),
+                            quat_wxyz=getattr(base, "quat_wxyz", None))
+    return pose.rotation, _as3(pose.position)
+
+
 def chain_from_finger(finger: object) -> FingerModel:
     """Build the kinematic model of one scene finger."""
-    from analysis.scene import Finger2D, Finger3D, FingerURDF
-
     if isinstance(finger, Finger2D):
         n = len(finger.links)
         origins = np.zeros((n, 3))
         for k in range(1, n):
             origins[k] = [finger.links[k - 1].length, 0.0, 0.0]
-        base_p = np.array([*finger.base.position, 0.0])
+        base_R, base_p = base_frame(finger)
         return SerialChain(
             finger.name,
-            rotz(finger.base.angle),
+            base_R,
             base_p,
             np.tile([0.0, 0.0, 1.0], (n, 1)),
             origins,
@@ -147,10 +151,11 @@ def chain_from_finger(finger: object) -> FingerModel:
             np.asarray(finger.q, dtype=float),
         )
     if isinstance(finger, Finger3D):
+        base_R, base_p = base_frame(finger)
         return SerialChain(
             finger.name,
-            quat_wxyz_to_matrix(finger.base.quat_wxyz),
-            np.asarray(finger.base.position, dtype=float),
+            base_R,
+            base_p,
             np.array([j.axis for j in finger.joints], dtype=float),
             np.array([j.origin for j in finger.joints], dtype=float),
             np.asarray(finger.tip, dtype=float),
@@ -158,6 +163,7 @@ def chain_from_finger(finger: object) -> FingerModel:
             np.asarray(finger.q, dtype=float),
         )
     if isinstance(finger, FingerURDF):
+        # deferred: the URDF model imports pinocchio, which only URDF fingers need
         from analysis.urdf import UrdfFinger
 
         return UrdfFinger.from_spec(finger)
@@ -179,7 +185,7 @@ class BodyRef:
 
 def joint_count(scene: Scene) -> int:
     """Total number of joints ``M`` of the hand."""
-    return int(sum(len(f.q) for f in scene.fingers))
+    return scene.M
 
 
 class HandKinematics:

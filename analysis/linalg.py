@@ -14,14 +14,18 @@ def _tol(s: Array) -> float:
     return RANK_RTOL * max(1.0, float(s[0]) if s.size else 0.0)
 
 
-def null_space(A: Array) -> Array:
-    """Orthonormal basis ``(n, n - rank)`` of ``{x : A x = 0}`` for ``A`` of shape ``(m, n)``."""
+def null_space(A: Array, tol: float | None = None) -> Array:
+    """Orthonormal basis ``(n, n - rank)`` of ``{x : A x = 0}`` for ``A`` of shape ``(m, n)``.
+
+    Singular values ``<= tol`` count as zero; by default ``tol = RANK_RTOL * max(1, s_max)``,
+    the tolerance of :func:`rank`.
+    """
     A = np.asarray(A, dtype=float)
     n = A.shape[1]
-    if A.shape[0] == 0:
+    if A.shape[0] == 0 or n == 0:
         return np.eye(n)
     _, s, Vt = np.linalg.svd(A, full_matrices=True)
-    rank = int(np.sum(s > _tol(s)))
+    rank = int(np.sum(s > (_tol(s) if tol is None else tol)))
     return Vt[rank:].T.copy()
 
 

@@ -85,16 +85,14 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import highspy
 import numpy as np
-import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from analysis._types import Array
 from analysis.contacts import GraspSystem
-from analysis.exceptions import CombinationError, SolverError, SolverTimeLimit
-
-INF = highspy.kHighsInf
+from analysis.exceptions import CombinationError
+from analysis.linalg import null_space
+from analysis.solvers.highs import INF, RowBoundLP
 
 __all__ = [
     "CategoryMode",
@@ -351,92 +349,9 @@ def _slide_tokens(dim: int, U: Array) -> list[str]:
     return tokens
 
 
-def _null(B: Array, tol: float) -> Array:
-    """Orthonormal basis ``(k, k - rank)`` of ``null(B)`` for ``B`` ``(r, k)`` (SVD, singular
-    values ``<= tol`` are zero)."""
-    k = B.shape[1]
-    if B.shape[0] == 0 or k == 0:
-        return np.eye(k)
-    _, s, Vt = np.linalg.svd(B, full_matrices=True)
-    rank = int(np.sum(s > tol))
-    return np.ascontiguousarray(Vt[rank:].T)
-
-
 def _nonzero_on(rows: Array, N: Array, tol: float) -> bool:
     """Whether the subspace ``range(N)`` is not inside ``null(rows)``."""
     return N.shape[1] > 0 and float(np.linalg.norm(rows @ N)) > tol
-
-
-# --------------------------------------------------------------------------------------------
-# The feasibility LP (one warm-started HiGHS model)
-
-
-class _RowLP:
-    """Feasibility of ``lower <= H v <= upper``, ``|v|_inf <= 1`` (zero objective).
-
-    The rows ``H`` are fixed; each query changes only row bounds, so HiGHS re-solves warm from
-    the previous basis. Infeasible is an answer (``None``); anything else that is not a feasible
-    point raises :class:`SolverError` (after one cold retry).
-    """
-
-    def __init__(self, H: Array, feasibility: float):
-        self.H = np.ascontiguousarray(H, dtype=float)  # (K, n)
-        K, n = self.H.shape
-        self.K, self.n = K, n
-        self.count = 0
-        self._tol = feasibility
-        self._idx = np.arange(K, dtype=np.int32)
-        self._h = highspy.Highs()
-        h = self._h
-        h.setOptionValue("output_flag", False)
-        h.setOptionValue("presolve", "off")
-        h.setOptionValue("primal_feasibility_tolerance", feasibility)
-        h.setOptionValue("dual_feasibility_tolerance", 1e-9)
-        lp = highspy.HighsLp()
-        lp.num_col_ = n
-        lp.num_row_ = K
-        lp.col_cost_ = np.zeros(n)
-        lp.col_lower_ = -np.ones(n)
-        lp.col_upper_ = np.ones(n)
-        lp.row_lower_ = np.full(K, -INF)
-        lp.row_upper_ = np.full(K, INF)
-        A = sp.csc_matrix(self.H)
-        lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-        lp.a_matrix_.start_ = A.indptr
-        lp.a_matrix_.index_ = A.indices
-        lp.a_matrix_.value_ = A.data
-        if h.passModel(lp) == highspy.HighsStatus.kError:
-            raise SolverError("HiGHS", "mode enumeration LP could not be loaded")
-
-    def solve(self, lower: Array, upper: Array) -> Array | None:
-        """A point of the polytope, or ``None`` if it is empty."""
-        self.count += 1
-        if self.K == 0 or self.n == 0:
-            ok = bool(np.all(lower <= self._tol) and np.all(upper >= -self._tol))
-            return np.zeros(self.n) if ok else None
-        self._h.changeRowsBounds(self.K, self._idx, lower, upper)  # type: ignore[attr-defined]
-        for attempt in range(2):
-            self._h.run()
-            ms = self._h.getModelStatus()
-            if ms == highspy.HighsModelStatus.kInfeasible:
-                return None
-            if ms == highspy.HighsModelStatus.kOptimal:
-                v = np.asarray(self._h.getSolution().col_value, dtype=float)
-                Hv = self.H @ v
-                slack = 10 * self._tol + 1e-12
-                if np.all(Hv >= lower - slack) and np.all(Hv <= upper + slack):
-                    return v
-                if attempt == 0:
-                    self._h.clearSolver()
-                    continue
-                raise SolverError("HiGHS", "mode LP returned a point violating its constraints")
-            if ms in (highspy.HighsModelStatus.kTimeLimit, highspy.HighsModelStatus.kIterationLimit):
-                raise SolverTimeLimit("HiGHS", self._h.modelStatusToString(ms))
-            if attempt == 0:
-                self._h.clearSolver()
-                continue
-            raise SolverError("HiGHS", f"mode LP ended with status '{self._h.modelStatusToString(ms)}'")
-        raise AssertionError("unreachable")
 
 
 # --------------------------------------------------------------------------------------------
@@ -472,7 +387,7 @@ class _Search:
         self.tol = tol
         # Row layout of the LP: normal rows 0..L-1, then tangent row (i, k) at L + i m + k.
         H = np.vstack([normal, tangent.reshape(self.L * self.m, self.n)])  # (L (1 + m), n)
-        self.lp = _RowLP(H, tol.feasibility)
+        self.lp = RowBoundLP(H, tol.feasibility)
         self.lower = np.full(H.shape[0], -INF)
         self.upper = np.full(H.shape[0], INF)
         # Parallel rows (|h_a . h_b| >= 1 - 1e-14, angle <= 1.5e-7 < margin): once one has a sign
@@ -556,7 +471,7 @@ class _Search:
                     w = self.lp.solve(self.lower, self.upper)
                 if w is not None:
                     signs.append(kind)
-                    rec(i + 1, w, N @ _null((a @ N)[None, :], self.tol.rank) if kind == "0" else N)
+                    rec(i + 1, w, N @ null_space((a @ N)[None, :], self.tol.rank) if kind == "0" else N)
                     signs.pop()
             self._set(i, "closed")
 
@@ -595,7 +510,7 @@ class _Search:
             else:
                 w = self.lp.solve(self.lower, self.upper)
             if w is not None:
-                N2 = N @ _null(T_i @ N, self.tol.rank)
+                N2 = N @ null_space(T_i @ N, self.tol.rank)
                 if all(_nonzero_on(self.tangent[s], N2, self.tol.rank) for s in slides):
                     labels[i] = "F"
                     rec(j + 1, w, N2)
@@ -661,7 +576,7 @@ class _Search:
                     continue
                 found[kind] = w
                 if kind == "0":
-                    N2 = N @ _null((g @ N)[None, :], self.tol.rank)
+                    N2 = N @ null_space((g @ N)[None, :], self.tol.rank)
                     if not all(_nonzero_on(self.tangent[s], N2, self.tol.rank) for s in pending):
                         continue
                     pending2 = pending

@@ -125,6 +125,13 @@ class Pose:
             return np.array([*dp, self.angle - start.angle])
         return np.concatenate([dp, matrix_to_rotvec(self.rotation @ start.rotation.T)])
 
+    def shortest_displacement_from(self, start: Pose) -> Array:
+        """The displacement ``s`` ``(D,)`` from ``start`` by the shortest rotation: ``dp`` and the
+        rotation coordinates of ``R R_start^T`` (3-D: the same as :meth:`displacement_from`; 2-D: the
+        angle difference wrapped into (-pi, pi], so a small turn across ``theta = pi`` stays small)."""
+        turn = Pose(np.zeros(self.dim), self.rotation @ start.rotation.T, self.dim)
+        return np.concatenate([self.position - start.position, turn.rotation_coordinates()])
+
     def rotation_angle_to(self, other: Pose) -> float:
         """The angle ``(>= 0)`` of the rotation from ``other`` to this pose (2-D: wrapped to pi)."""
         if self.dim == 2:

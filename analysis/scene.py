@@ -1,20 +1,23 @@
-"""Scene format: pydantic models, loading (JSON/YAML) and geometric validation.
+"""Scene format: the pydantic models and their structural checks.
 
 A scene is the input of every analysis: the object, the fixed bodies (palm, table), the
 fingers (serial chains or URDF), the contacts (order = letters of a combination string) and
-the external wrench. Every check that can fail names the field it concerns through pydantic's
-error location, e.g. ``contacts.2.normal``.
+the external wrench. The models check what needs no kinematics: types, finite numbers, unit
+quaternions and joint axes, vector lengths for ``dim``, shapes that fit ``dim``, unique body
+names, counts (``q`` per finger, contacts, joint torque limits). Every check that can fail names
+the field it concerns through pydantic's error location, e.g. ``contacts.2.point``.
+
+The geometric checks (contact normals of unit length pointing into the object, contact bodies
+that exist, contact points on the surfaces of their body and of the object) and loading from
+JSON/YAML live in :mod:`analysis.loader`.
 """
 
 from __future__ import annotations
 
-import json
 import math
-from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import numpy as np
-import yaml
 from pydantic import (
     BaseModel,
     ConfigDict,
@@ -27,12 +30,8 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-from analysis.exceptions import SceneError
-
 #: Maximum number of contacts a scene may declare (3**L combinations are enumerated).
 MAX_CONTACTS = 16
-#: Absolute tolerance (scene length units) for "a point lies on a surface".
-GEOMETRY_TOL = 1e-4
 #: Tolerance on the norm of unit vectors (normals, quaternions, axes).
 UNIT_TOL = 1e-4
 
@@ -264,7 +263,7 @@ Finger = Annotated[
         custom_error_message="a finger needs 'links' (planar), 'joints' (spatial) or 'urdf'",
     ),
 ]
-#: Union tags that pydantic inserts into error locations; ``scene_from_dict`` drops them.
+#: Union tags that pydantic inserts into error locations; :func:`clean_loc` drops them.
 _UNION_TAGS = {
     *("Finger2D", "Finger3D", "FingerURDF"),
     *("disk", "sphere", "box", "polygon", "cylinder", "mesh", "segment"),
@@ -302,28 +301,31 @@ class Scene(_Model):
         """Force components per contact: 2 in 2-D, 3 in 3-D."""
         return self.dim
 
+    @property
+    def M(self) -> int:
+        """Total number of joints of the hand (the length of ``q = col[q_i]``)."""
+        return int(sum(len(f.q) for f in self.fingers))
+
     @model_validator(mode="after")
-    def _check_geometry(self) -> Scene:
+    def _check_structure(self) -> Scene:
         errors: list[InitErrorDetails] = []
 
         def err(loc: tuple[str | int, ...], msg: str, value: Any) -> None:
-            errors.append(
-                InitErrorDetails(type=PydanticCustomError("scene", msg), loc=loc, input=value)
-            )
+            errors.append(scene_error_details(loc, msg, value))
 
         _check_shapes_and_lengths(self, err)
-        if errors:
-            raise ValidationError.from_exception_data("Scene", errors)
-        _check_contacts(self, err)
         if errors:
             raise ValidationError.from_exception_data("Scene", errors)
         return self
 
 
+def scene_error_details(loc: tuple[str | int, ...], msg: str, value: Any) -> InitErrorDetails:
+    """One error of type ``scene`` at ``loc`` (a pydantic error location) with message ``msg``."""
+    return InitErrorDetails(type=PydanticCustomError("scene", msg), loc=loc, input=value)
+
+
 def _raise(loc: tuple[str | int, ...], msg: str, value: Any) -> None:
-    raise ValidationError.from_exception_data(
-        "Scene", [InitErrorDetails(type=PydanticCustomError("scene", msg), loc=loc, input=value)]
-    )
+    raise ValidationError.from_exception_data("Scene", [scene_error_details(loc, msg, value)])
 
 
 def _check_shapes_and_lengths(scene: Scene, err: Any) -> None:
@@ -378,57 +380,20 @@ def _check_shapes_and_lengths(scene: Scene, err: Any) -> None:
         err(("contacts",), f"has {len(scene.contacts)} contacts; the limit is {MAX_CONTACTS}",
             len(scene.contacts))
     if scene.joint_torque_limits is not None:
-        from analysis.kinematics import joint_count
-
-        M = joint_count(scene)
+        M = scene.M
         if len(scene.joint_torque_limits) != M:
             err(("joint_torque_limits",), f"must have one entry per joint ({M})", scene.joint_torque_limits)
 
 
-def _check_contacts(scene: Scene, err: Any) -> None:
-    from analysis.geometry import body_surface_distance, object_signed_distance
-    from analysis.kinematics import HandKinematics
-
-    try:
-        hand = HandKinematics.from_scene(scene)
-    except SceneError as e:
-        err(tuple(e.loc), e.reason, None)
-        return
-    for i, c in enumerate(scene.contacts):
-        n = np.asarray(c.normal, dtype=float)
-        p = np.asarray(c.point, dtype=float)
-        norm = float(np.linalg.norm(n))
-        if abs(norm - 1.0) > UNIT_TOL:
-            err(("contacts", i, "normal"), f"must be a unit vector (norm {norm:.6g})", c.normal)
-            continue
-        ref = hand.resolve_body(c.body)
-        if ref is None:
-            err(("contacts", i, "body"), f"unknown body '{c.body}' (known: {', '.join(hand.body_names())})",
-                c.body)
-            continue
-        dist = body_surface_distance(scene, hand, ref, p)
-        if dist is not None and abs(dist) > GEOMETRY_TOL:
-            err(("contacts", i, "point"), f"is {abs(dist):.4g} away from the surface of body '{c.body}'",
-                c.point)
-            continue
-        sd = object_signed_distance(scene, p)
-        if sd is not None and abs(sd) > GEOMETRY_TOL:
-            err(("contacts", i, "point"), f"is {abs(sd):.4g} away from the object's surface", c.point)
-            continue
-        inside = object_signed_distance(scene, p + 1e-3 * n)
-        if inside is not None and inside >= 0.0:
-            err(("contacts", i, "normal"), "must point into the object (it points outward)", c.normal)
-
-
 # --------------------------------------------------------------------------------------------
-# Loading
+# Error locations
 
 
 def _format_loc(loc: tuple[str | int, ...]) -> str:
     return ".".join(str(part) for part in loc) if loc else "scene"
 
 
-def _clean_loc(loc: tuple[str | int, ...]) -> tuple[str | int, ...]:
+def clean_loc(loc: tuple[str | int, ...]) -> tuple[str | int, ...]:
     """Drop the union tags pydantic puts after ``...shape`` and ``fingers.<i>`` in a location."""
     out: list[str | int] = []
     for i, part in enumerate(loc):
@@ -440,33 +405,8 @@ def _clean_loc(loc: tuple[str | int, ...]) -> tuple[str | int, ...]:
     return tuple(out)
 
 
-def scene_from_dict(data: Any) -> Scene:
-    """Validate a parsed scene; raise :class:`SceneError` naming the first bad field."""
-    try:
-        return Scene.model_validate(data)
-    except ValidationError as e:
-        first = e.errors()[0]
-        loc = _clean_loc(tuple(first["loc"]))
-        errors = [{**err, "loc": _clean_loc(tuple(err["loc"]))} for err in e.errors()]
-        raise SceneError(loc, first["msg"], errors=errors) from None
-
-
-def parse_scene_text(text: str, suffix: str = ".json") -> Scene:
-    try:
-        data = yaml.safe_load(text) if suffix in (".yaml", ".yml") else json.loads(text)
-    except (json.JSONDecodeError, yaml.YAMLError) as e:
-        raise SceneError((), f"cannot parse {suffix.lstrip('.').upper()}: {e}") from None
-    return scene_from_dict(data)
-
-
-def load_scene(path: str | Path) -> Scene:
-    """Load a scene from a ``.json``, ``.yaml`` or ``.yml`` file."""
-    path = Path(path)
-    try:
-        text = path.read_text()
-    except OSError as e:
-        raise SceneError((), f"cannot read {path}: {e.strerror}") from None
-    return parse_scene_text(text, path.suffix.lower())
+#: The former private name, still imported by the service's error handlers.
+_clean_loc = clean_loc
 
 
 def scene_json_schema() -> dict[str, Any]:
@@ -481,10 +421,8 @@ __all__ = [
     "FingerURDF",
     "FixedBody",
     "Scene",
-    "SceneError",
     "_format_loc",
-    "load_scene",
-    "parse_scene_text",
-    "scene_from_dict",
+    "clean_loc",
+    "scene_error_details",
     "scene_json_schema",
 ]

@@ -32,7 +32,7 @@ import importlib.metadata
 import os
 import sys
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import pinocchio as pin
@@ -40,10 +40,7 @@ import pinocchio as pin
 from analysis._types import Array
 from analysis.exceptions import SceneError
 from analysis.rotations import quat_wxyz_to_matrix, skew
-
-if TYPE_CHECKING:
-    from analysis.scene import FingerURDF
-
+from analysis.scene import FingerURDF
 
 #: Prefix of ``urdf.file`` that resolves inside example-robot-data's ``robots`` directory.
 ERD_PREFIX = "example-robot-data:"

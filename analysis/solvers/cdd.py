@@ -14,6 +14,7 @@ import numpy as np
 
 from analysis._types import Array
 from analysis.exceptions import SolverError
+from analysis.solvers.highs import LPModel
 
 #: Entries below this magnitude in cdd's output are set to zero.
 CLEAN_TOL = 1e-11
@@ -131,8 +132,6 @@ def _reduce_by_lp(g: Generators) -> Generators:
     One warm-started HiGHS model per kind: generator ``i`` is tested by fixing its own weight to
     zero and asking for the others to reproduce it.
     """
-    from analysis.solvers.highs import LPModel
-
     V, R, Ln = g.vertices, g.rays, g.lines
     n = V.shape[1] if V.size else R.shape[1]
     keep_r = np.ones(len(R), dtype=bool)

@@ -1,10 +1,19 @@
-"""HiGHS adapter: linear (and convex quadratic) programs in the project's own types.
+"""HiGHS adapter: linear programs in the project's own types (the only module importing highspy).
 
 Infeasible and unbounded are answers (``LPResult.status``); anything else HiGHS reports
 (time limit, numerical trouble, load errors) is raised as :class:`SolverError` or
-:class:`SolverTimeLimit`. ``LPModel`` keeps one HiGHS instance so a sequence of LPs that differ
-only in their objective re-solves warm from the previous basis (the DAFC oracle over many
-directions, the enumeration of combinations).
+:class:`SolverTimeLimit`. Two models keep one HiGHS instance each so that a sequence of related
+LPs re-solves warm from the previous basis:
+
+* :class:`LPModel`: ``min/max c^T x`` over fixed constraints whose objective, equality right-hand
+  side, column bounds or a few coefficients change between solves (the DAFC oracle over many
+  directions, the enumeration of combinations, generator reduction);
+* :class:`RowBoundLP`: feasibility of ``lower <= H v <= upper`` in the box ``|v|_inf <= 1`` where
+  only the row bounds change (the realisability LPs of the contact-mode enumeration).
+
+An optimal :class:`LPResult` carries the multipliers (row duals, reduced costs) and reports its
+own residuals: primal (equality, inequality, bound violation), dual (stationarity) and the
+duality gap.
 """
 
 from __future__ import annotations
@@ -32,16 +41,108 @@ Status = Literal["optimal", "infeasible", "unbounded"]
 
 
 @dataclass(frozen=True)
+class LPProblem:
+    """The data of ``min/max c^T x  s.t.  A_ub x <= b_ub,  A_eq x = b_eq,  lb <= x <= ub``
+    (``-inf``/``inf`` bounds where a variable is free), as it was when a result was solved."""
+
+    c: Array  # (n,) objective in the caller's sense
+    A_ub: Array  # (m_ub, n)
+    b_ub: Array  # (m_ub,)
+    A_eq: Array  # (m_eq, n)
+    b_eq: Array  # (m_eq,)
+    lb: Array  # (n,)
+    ub: Array  # (n,)
+    maximize: bool = False
+
+    @property
+    def sense(self) -> float:
+        """``s``: HiGHS minimises ``s c^T x`` (``s = -1`` for a maximisation)."""
+        return -1.0 if self.maximize else 1.0
+
+
+@dataclass(frozen=True)
 class LPResult:
-    """Outcome of ``min c^T x`` (or max) subject to the model's constraints."""
+    """Outcome of ``min c^T x`` (or max) subject to the model's constraints.
+
+    For an optimal result the multipliers satisfy the KKT conditions of the minimisation HiGHS
+    solved, ``min s c^T x`` (``s = problem.sense``)::
+
+        s c + A_ub^T y_ub + A_eq^T y_eq + z = 0,   y_ub >= 0,
+        z_j <= 0 where x_j = lb_j,   z_j >= 0 where x_j = ub_j,   z_j = 0 in between,
+
+    (so ``y_ub`` and ``y_eq`` are the row duals, ``z`` the reduced costs, in the sign convention
+    of qpsolvers' ``Solution``). The residual methods return ``inf`` where a quantity is missing
+    (no point, no multipliers).
+    """
 
     status: Status
     x: Array | None  # (n,) optimal point, None unless optimal
     objective: float | None  # in the caller's sense (max problems report the max)
+    y_ub: Array | None = None  # (m_ub,) multipliers of A_ub x <= b_ub, >= 0
+    y_eq: Array | None = None  # (m_eq,) multipliers of A_eq x = b_eq
+    z: Array | None = None  # (n,) multipliers of the bounds (reduced costs)
+    problem: LPProblem | None = None
 
     @property
     def found(self) -> bool:
         return self.status == "optimal"
+
+    @property
+    def has_duals(self) -> bool:
+        return self.y_ub is not None and self.y_eq is not None and self.z is not None
+
+    # -- primal ---------------------------------------------------------------------------------
+
+    def equality_violation(self) -> float:
+        """``|A_eq x - b_eq|_inf``."""
+        if self.x is None or self.problem is None:
+            return np.inf
+        P = self.problem
+        return float(np.max(np.abs(P.A_eq @ self.x - P.b_eq), initial=0.0))
+
+    def inequality_violation(self) -> float:
+        """``max(A_ub x - b_ub, 0)``."""
+        if self.x is None or self.problem is None:
+            return np.inf
+        P = self.problem
+        return float(np.max(P.A_ub @ self.x - P.b_ub, initial=0.0))
+
+    def bound_violation(self) -> float:
+        """``max(lb - x, x - ub, 0)``."""
+        if self.x is None or self.problem is None:
+            return np.inf
+        P = self.problem
+        return float(max(np.max(P.lb - self.x, initial=0.0), np.max(self.x - P.ub, initial=0.0)))
+
+    def primal_residual(self) -> float:
+        """The largest of the equality, inequality and bound violations."""
+        return max(self.equality_violation(), self.inequality_violation(), self.bound_violation())
+
+    # -- dual -----------------------------------------------------------------------------------
+
+    def dual_residual(self) -> float:
+        """Stationarity ``|s c + A_ub^T y_ub + A_eq^T y_eq + z|_inf``."""
+        if self.x is None or self.problem is None or not self.has_duals:
+            return np.inf
+        assert self.y_ub is not None and self.y_eq is not None and self.z is not None
+        P = self.problem
+        r = P.sense * P.c + P.A_ub.T @ self.y_ub + P.A_eq.T @ self.y_eq + self.z  # (n,)
+        return float(np.max(np.abs(r), initial=0.0))
+
+    def duality_gap(self) -> float:
+        """``|s c^T x + b_ub^T y_ub + b_eq^T y_eq + lb^T z^- + ub^T z^+|`` (finite bounds only;
+        ``z^-``, ``z^+`` the negative and positive parts of ``z``)."""
+        if self.x is None or self.problem is None or not self.has_duals:
+            return np.inf
+        assert self.y_ub is not None and self.y_eq is not None and self.z is not None
+        P = self.problem
+        lo, up = np.isfinite(P.lb), np.isfinite(P.ub)
+        bounds = P.lb[lo] @ np.minimum(self.z[lo], 0.0) + P.ub[up] @ np.maximum(self.z[up], 0.0)
+        return float(abs(P.sense * P.c @ self.x + P.b_ub @ self.y_ub + P.b_eq @ self.y_eq + bounds))
+
+    def is_optimal(self, tol: float) -> bool:
+        """Primal residual, dual residual and duality gap all below ``tol``."""
+        return max(self.primal_residual(), self.dual_residual(), self.duality_gap()) < tol
 
 
 class LPModel:
@@ -71,35 +172,36 @@ class LPModel:
             raise SolverError("HiGHS", "constraint matrix has non-finite entries")
         if not (np.all(np.isfinite(b_ub)) and np.all(np.isfinite(b_eq))):
             raise SolverError("HiGHS", "constraint bounds have non-finite entries")
-        self.A = np.vstack([A_ub, A_eq])  # (m, n)
+        # The model's data, kept for the residuals of its results. Each change replaces an array
+        # (never writes into it), so a result keeps the data it was solved from.
+        self.A_ub, self.b_ub, self.A_eq, self.b_eq = A_ub, b_ub, A_eq, b_eq
+        self.lb, self.ub = _bounds(lb, n, -INF), _bounds(ub, n, INF)
         self._n_ub = A_ub.shape[0]
-        lp = highspy.HighsLp()
-        lp.num_col_ = n
-        lp.num_row_ = self.A.shape[0]
-        lp.col_cost_ = np.zeros(n)
-        lp.col_lower_ = _bounds(lb, n, -INF)
-        lp.col_upper_ = _bounds(ub, n, INF)
-        lp.row_lower_ = np.concatenate([np.full(len(b_ub), -INF), b_eq])
-        lp.row_upper_ = np.concatenate([b_ub, b_eq])
-        start, index, value = _csc(self.A)
-        lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-        lp.a_matrix_.start_ = start
-        lp.a_matrix_.index_ = index
-        lp.a_matrix_.value_ = value
-        self._h = highspy.Highs()
-        self._h.setOptionValue("output_flag", False)
-        self._h.setOptionValue("presolve", "off")
-        self._h.setOptionValue("simplex_strategy", 4)
-        # tight feasibility: near-singular grasps (e.g. the Allegro scene) otherwise accept
-        # friction violations of ~1e-7 and call an infeasible stationary grasp feasible
-        self._h.setOptionValue("primal_feasibility_tolerance", FEAS_TOL)
-        self._h.setOptionValue("dual_feasibility_tolerance", FEAS_TOL)
+        options: dict[str, bool | int | float | str] = {
+            "presolve": "off",
+            "simplex_strategy": 4,
+            # tight feasibility: near-singular grasps (e.g. the Allegro scene) otherwise accept
+            # friction violations of ~1e-7 and call an infeasible stationary grasp feasible
+            "primal_feasibility_tolerance": FEAS_TOL,
+            "dual_feasibility_tolerance": FEAS_TOL,
+        }
         if time_limit is not None:
-            self._h.setOptionValue("time_limit", float(time_limit))
-        status = self._h.passModel(lp)
-        if status == highspy.HighsStatus.kError:
-            raise SolverError("HiGHS", "model could not be loaded")
+            options["time_limit"] = float(time_limit)
+        self._h = _load(
+            self.A,
+            np.concatenate([np.full(len(b_ub), -INF), b_eq]),
+            np.concatenate([b_ub, b_eq]),
+            self.lb,
+            self.ub,
+            options,
+            "model could not be loaded",
+        )
         self._idx = np.arange(n, dtype=np.int32)
+
+    @property
+    def A(self) -> Array:
+        """The constraint matrix ``[A_ub; A_eq]`` ``(m, n)``."""
+        return np.vstack([self.A_ub, self.A_eq])
 
     @property
     def n_ub(self) -> int:
@@ -108,17 +210,32 @@ class LPModel:
 
     def change_coefficients(self, rows: Array, cols: Array, values: Array) -> None:
         """Overwrite entries of the constraint matrix (rows index ``[A_ub; A_eq]``)."""
+        A_ub, A_eq = self.A_ub.copy(), self.A_eq.copy()
         for r, c, v in zip(np.ravel(rows), np.ravel(cols), np.ravel(values), strict=True):
             self._h.changeCoeff(int(r), int(c), float(v))
+            if int(r) < self._n_ub:
+                A_ub[int(r), int(c)] = float(v)
+            else:
+                A_eq[int(r) - self._n_ub, int(c)] = float(v)
+        self.A_ub, self.A_eq = A_ub, A_eq
 
     def set_col_bounds(self, j: int, lb: float, ub: float) -> None:
-        self._h.changeColBounds(int(j), float(lb) if np.isfinite(lb) else -INF, float(ub) if np.isfinite(ub) else INF)
+        lo, up = float(lb) if np.isfinite(lb) else -INF, float(ub) if np.isfinite(ub) else INF
+        self._h.changeColBounds(int(j), lo, up)
+        self.lb, self.ub = self.lb.copy(), self.ub.copy()
+        self.lb[int(j)], self.ub[int(j)] = lo, up
 
     def set_eq_rhs(self, b_eq: Array) -> None:
         """New right-hand side of the equality rows (warm start kept)."""
         b = np.asarray(b_eq, dtype=float).ravel()
         idx = np.arange(self._n_ub, self._n_ub + len(b), dtype=np.int32)
         self._h.changeRowsBounds(len(b), idx, b, b)  # type: ignore[attr-defined]
+        self.b_eq = np.concatenate([b, self.b_eq[len(b):]])
+
+    def problem(self, c: Array, maximize: bool = False) -> LPProblem:
+        """The model's current data with the objective ``c``."""
+        return LPProblem(np.asarray(c, dtype=float).ravel(), self.A_ub, self.b_ub, self.A_eq, self.b_eq,
+                         self.lb, self.ub, maximize)
 
     def solve(self, c: Array, maximize: bool = False) -> LPResult:
         c = np.asarray(c, dtype=float).ravel()
@@ -141,13 +258,18 @@ class LPModel:
             ms = self._h.getModelStatus()
             self._h.setOptionValue("presolve", "off")
             self._h.setOptionValue("simplex_strategy", 4)
+        problem = self.problem(c, maximize)
         if ms == highspy.HighsModelStatus.kOptimal:
-            x = np.asarray(self._h.getSolution().col_value, dtype=float)
-            return LPResult("optimal", x, float(c @ x))
+            sol = self._h.getSolution()
+            x = np.asarray(sol.col_value, dtype=float)
+            # HiGHS' duals satisfy s c - A^T row_dual - col_dual = 0: negated, they are LPResult's
+            y = -np.asarray(sol.row_dual, dtype=float)
+            return LPResult("optimal", x, float(c @ x), y_ub=y[: self._n_ub], y_eq=y[self._n_ub :],
+                            z=-np.asarray(sol.col_dual, dtype=float), problem=problem)
         if ms == highspy.HighsModelStatus.kInfeasible:
-            return LPResult("infeasible", None, None)
+            return LPResult("infeasible", None, None, problem=problem)
         if ms == highspy.HighsModelStatus.kUnbounded:
-            return LPResult("unbounded", None, np.inf if maximize else -np.inf)
+            return LPResult("unbounded", None, np.inf if maximize else -np.inf, problem=problem)
         if ms == highspy.HighsModelStatus.kUnboundedOrInfeasible:
             # Decide with a feasibility solve (zero objective) from scratch.
             self._h.changeColsCost(self.n, self._idx, np.zeros(self.n))
@@ -155,9 +277,9 @@ class LPModel:
             self._h.run()
             ms2 = self._h.getModelStatus()
             if ms2 == highspy.HighsModelStatus.kInfeasible:
-                return LPResult("infeasible", None, None)
+                return LPResult("infeasible", None, None, problem=problem)
             if ms2 == highspy.HighsModelStatus.kOptimal:
-                return LPResult("unbounded", None, np.inf if maximize else -np.inf)
+                return LPResult("unbounded", None, np.inf if maximize else -np.inf, problem=problem)
             ms = ms2
         if ms in (highspy.HighsModelStatus.kTimeLimit, highspy.HighsModelStatus.kIterationLimit):
             raise SolverTimeLimit("HiGHS", self._h.modelStatusToString(ms))
@@ -170,6 +292,40 @@ def _csc(A: Array) -> tuple[NDArray[np.int32], NDArray[np.int32], Array]:
     counts = np.bincount(cols, minlength=A.shape[1])
     start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
     return start, rows.astype(np.int32), A[rows, cols]
+
+
+def _load(
+    A: Array,  # (m, n)
+    row_lower: Array,  # (m,)
+    row_upper: Array,  # (m,)
+    col_lower: Array,  # (n,)
+    col_upper: Array,  # (n,)
+    options: dict[str, bool | int | float | str],
+    load_error: str,
+) -> highspy.Highs:
+    """A silent HiGHS instance holding ``row_lower <= A x <= row_upper``, ``col_lower <= x <=
+    col_upper`` with zero objective; ``SolverError(load_error)`` if HiGHS rejects it."""
+    m, n = A.shape
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    for name, option in options.items():
+        h.setOptionValue(name, option)
+    lp = highspy.HighsLp()
+    lp.num_col_ = n
+    lp.num_row_ = m
+    lp.col_cost_ = np.zeros(n)
+    lp.col_lower_ = col_lower
+    lp.col_upper_ = col_upper
+    lp.row_lower_ = row_lower
+    lp.row_upper_ = row_upper
+    start, index, value = _csc(A)
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = start
+    lp.a_matrix_.index_ = index
+    lp.a_matrix_.value_ = value
+    if h.passModel(lp) == highspy.HighsStatus.kError:
+        raise SolverError("HiGHS", load_error)
+    return h
 
 
 def _bounds(b: Array | float | None, n: int, default: float) -> Array:
@@ -195,3 +351,60 @@ def solve_lp(
     c = np.asarray(c, dtype=float).ravel()
     model = LPModel(len(c), A_ub, b_ub, A_eq, b_eq, lb, ub, time_limit)
     return model.solve(c, maximize=maximize)
+
+
+class RowBoundLP:
+    """Feasibility of ``lower <= H v <= upper``, ``|v|_inf <= 1`` (zero objective).
+
+    The rows ``H`` ``(K, n)`` are fixed; each query changes only row bounds, so HiGHS re-solves
+    warm from the previous basis. ``feasibility`` is HiGHS' primal feasibility tolerance, and a
+    returned point is checked against the bounds with slack ``10 feasibility``. Infeasible is an
+    answer (``None``); anything else that is not a feasible point raises :class:`SolverError`
+    (after one cold retry). ``count`` is the number of queries so far. The contact-mode
+    enumeration (:mod:`analysis.modes`) decides the realisability of its search nodes with it.
+    """
+
+    def __init__(self, H: Array, feasibility: float):
+        self.H = np.ascontiguousarray(H, dtype=float)  # (K, n)
+        K, n = self.H.shape
+        self.K, self.n = K, n
+        self.count = 0
+        self._tol = feasibility
+        self._idx = np.arange(K, dtype=np.int32)
+        options: dict[str, bool | int | float | str] = {
+            "presolve": "off",
+            "primal_feasibility_tolerance": feasibility,
+            "dual_feasibility_tolerance": 1e-9,
+        }
+        self._h = _load(self.H, np.full(K, -INF), np.full(K, INF), -np.ones(n), np.ones(n), options,
+                        "mode enumeration LP could not be loaded")
+
+    def solve(self, lower: Array, upper: Array) -> Array | None:
+        """A point ``(n,)`` of the polytope, or ``None`` if it is empty."""
+        self.count += 1
+        if self.K == 0 or self.n == 0:
+            ok = bool(np.all(lower <= self._tol) and np.all(upper >= -self._tol))
+            return np.zeros(self.n) if ok else None
+        self._h.changeRowsBounds(self.K, self._idx, lower, upper)  # type: ignore[attr-defined]
+        for attempt in range(2):
+            self._h.run()
+            ms = self._h.getModelStatus()
+            if ms == highspy.HighsModelStatus.kInfeasible:
+                return None
+            if ms == highspy.HighsModelStatus.kOptimal:
+                v = np.asarray(self._h.getSolution().col_value, dtype=float)
+                Hv = self.H @ v
+                slack = 10 * self._tol + 1e-12
+                if np.all(Hv >= lower - slack) and np.all(Hv <= upper + slack):
+                    return v
+                if attempt == 0:
+                    self._h.clearSolver()
+                    continue
+                raise SolverError("HiGHS", "mode LP returned a point violating its constraints")
+            if ms in (highspy.HighsModelStatus.kTimeLimit, highspy.HighsModelStatus.kIterationLimit):
+                raise SolverTimeLimit("HiGHS", self._h.modelStatusToString(ms))
+            if attempt == 0:
+                self._h.clearSolver()
+                continue
+            raise SolverError("HiGHS", f"mode LP ended with status '{self._h.modelStatusToString(ms)}'")
+        raise AssertionError("unreachable")

@@ -29,7 +29,8 @@ from analysis.contacts import (
 )
 from analysis.exceptions import CombinationError, SceneError
 from analysis.kinematics import HandKinematics
-from analysis.scene import Scene, load_scene, scene_from_dict
+from analysis.loader import load_scene, scene_from_dict
+from analysis.scene import Scene
 
 Array = NDArray[np.float64]
 

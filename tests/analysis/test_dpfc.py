@@ -11,7 +11,7 @@ from analysis.combination import CombinationParts
 from analysis.contacts import build_system
 from analysis.dpfc import DPFC, dpfc
 from analysis.exceptions import NoStationaryGrasp
-from analysis.scene import scene_from_dict
+from analysis.loader import scene_from_dict
 from analysis.stationary import StationaryGrasp, stationary_grasp
 
 TOL = 1e-8

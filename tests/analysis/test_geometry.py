@@ -16,7 +16,8 @@ from analysis.geometry import (
     shape_signed_distance,
 )
 from analysis.kinematics import HandKinematics
-from analysis.scene import Box, Cylinder, Disk, Mesh, Polygon, Segment, Sphere, load_scene
+from analysis.loader import load_scene
+from analysis.scene import Box, Cylinder, Disk, Mesh, Polygon, Segment, Sphere
 
 EXAMPLES = Path(__file__).parents[2] / "examples"
 TOL = 1e-12

@@ -19,7 +19,8 @@ from analysis.kinematics import (
     joint_count,
     segment_distance,
 )
-from analysis.scene import Base2D, Finger2D, Link2D, load_scene
+from analysis.loader import load_scene
+from analysis.scene import Base2D, Finger2D, Link2D
 
 Array = NDArray[np.float64]
 

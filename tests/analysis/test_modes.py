@@ -19,8 +19,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from analysis.contacts import GraspSystem, build_system, system_from_arrays
 from analysis.exceptions import CombinationError
+from analysis.loader import load_scene, scene_from_dict
 from analysis.modes import ModeTolerances, combination_admissible, enumerate_modes
-from analysis.scene import load_scene, scene_from_dict
 
 Array = NDArray[np.float64]
 

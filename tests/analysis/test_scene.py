@@ -14,15 +14,13 @@ import pytest
 import yaml
 
 from analysis.exceptions import SceneError
+from analysis.loader import check_geometry, geometry_errors, load_scene, parse_scene_text, scene_from_dict
 from analysis.scene import (
     MAX_CONTACTS,
     Finger2D,
     Finger3D,
     FingerURDF,
     Scene,
-    load_scene,
-    parse_scene_text,
-    scene_from_dict,
     scene_json_schema,
 )
 
@@ -595,3 +593,34 @@ def test_a_document_that_is_not_a_mapping(text: str, suffix: str) -> None:
         parse_scene_text(text, suffix)
     assert info.value.loc == ()
     assert str(info.value).startswith("scene: ") and "dictionary" in str(info.value)
+
+
+# --------------------------------------------------------------------------------------------
+# The model checks structure; the loader adds the geometric checks (one function for the service)
+
+
+def test_the_model_alone_accepts_a_point_off_its_body_and_check_geometry_names_it(planar: dict[str, Any]) -> None:
+    c = planar["contacts"][0]
+    c["point"] = [c["point"][0] + 0.01 * c["normal"][0], c["point"][1] + 0.01 * c["normal"][1]]
+    scene = Scene.model_validate(planar)  # structurally fine
+    errors = geometry_errors(scene)
+    assert [tuple(e["loc"]) for e in errors] == [("contacts", 0, "point")]
+    assert errors[0]["type"] == "scene" and "0.01 away from the surface of body 'left/0'" in errors[0]["msg"]
+    with pytest.raises(SceneError) as info:
+        check_geometry(scene)
+    from_dict = _expect_error(planar, ("contacts", 0, "point"), "0.01 away from the surface of body 'left/0'")
+    assert str(info.value) == str(from_dict) and info.value.errors == from_dict.errors
+    assert geometry_errors(scene_from_dict(_raw(PLANAR))) == []
+
+
+def test_geometry_errors_list_every_contact_in_scene_order(planar: dict[str, Any]) -> None:
+    planar["contacts"][3]["body"] = "thumb/0"
+    planar["contacts"][1]["normal"] = [0.6, -1.2]
+    nx, ny = planar["contacts"][0]["normal"]
+    planar["contacts"][0]["normal"] = [-nx, -ny]
+    errors = geometry_errors(Scene.model_validate(planar))
+    assert [tuple(e["loc"]) for e in errors] == [("contacts", 0, "normal"), ("contacts", 1, "normal"),
+                                                 ("contacts", 3, "body")]
+    with pytest.raises(SceneError) as info:
+        scene_from_dict(planar)
+    assert info.value.loc == ("contacts", 0, "normal") and info.value.errors == errors

@@ -1,4 +1,5 @@
-"""Solver adapters: known answers for HiGHS and cdd wrappers."""
+"""Solver adapters: known answers for the HiGHS and cdd wrappers; HiGHS results report their duals
+and residuals (KKT on random feasible LPs)."""
 
 from __future__ import annotations
 
@@ -6,7 +7,7 @@ import numpy as np
 import pytest
 
 from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators, reduce_generators
-from analysis.solvers.highs import LPModel, solve_lp
+from analysis.solvers.highs import INF, LPModel, RowBoundLP, solve_lp
 
 
 def test_lp_statuses():
@@ -58,3 +59,107 @@ def test_reduce_generators_keeps_only_extreme_points(extra):
     assert sorted(map(tuple, np.round(g.rays, 9))) == sorted(map(tuple, np.eye(3)))
     h = reduce_generators(Generators(V, np.zeros((0, 3)), np.zeros((0, 3))))
     assert sorted(map(tuple, np.round(h.vertices, 9))) == sorted(map(tuple, cube))
+
+
+# -- LPResult: duals and residuals ---------------------------------------------------------------
+
+
+def _random_feasible_lp(rng: np.random.Generator, n: int, m_ub: int, m_eq: int, free: bool):
+    """An LP with a known feasible point ``x0``; bounded below either by a finite box or (``free``)
+    by an objective built from dual-feasible multipliers ``c = -(A_ub^T y - A_eq^T w)``, ``y >= 0``."""
+    x0 = rng.normal(size=n)
+    A_ub = rng.normal(size=(m_ub, n))
+    b_ub = A_ub @ x0 + rng.uniform(0.0, 1.0, m_ub) * (rng.random(m_ub) < 0.7)  # some rows tight at x0
+    A_eq = rng.normal(size=(m_eq, n))
+    b_eq = A_eq @ x0
+    if free:
+        lb, ub = np.full(n, -np.inf), np.full(n, np.inf)
+        c = -(A_ub.T @ rng.uniform(0.0, 1.0, m_ub) + A_eq.T @ rng.normal(size=m_eq))
+    else:
+        lb, ub = x0 - rng.uniform(0.0, 2.0, n), x0 + rng.uniform(0.0, 2.0, n)
+        c = rng.normal(size=n)
+    return c, A_ub, b_ub, A_eq, b_eq, lb, ub
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_random_feasible_lps_have_zero_residuals_and_kkt_duals(seed):
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 9))
+    m_ub, m_eq = int(rng.integers(0, 2 * n)), int(rng.integers(0, n))
+    c, A_ub, b_ub, A_eq, b_eq, lb, ub = _random_feasible_lp(rng, n, m_ub, m_eq, free=seed % 3 == 0)
+    maximize = seed % 2 == 1
+    if maximize:
+        c = -c  # max (-c)^T x is the same bounded problem
+    r = solve_lp(c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, lb=lb, ub=ub, maximize=maximize)
+    assert r.status == "optimal" and r.has_duals
+    assert r.x is not None and r.y_ub is not None and r.y_eq is not None and r.z is not None
+    assert r.y_ub.shape == (m_ub,) and r.y_eq.shape == (m_eq,) and r.z.shape == (n,)
+    tol = 1e-7
+    assert r.equality_violation() < tol and r.inequality_violation() < tol and r.bound_violation() < tol
+    assert r.primal_residual() < tol and r.dual_residual() < tol and r.duality_gap() < tol
+    assert r.is_optimal(tol)
+    # KKT of min s c^T x, written out: stationarity, dual signs, complementary slackness
+    s = -1.0 if maximize else 1.0
+    np.testing.assert_allclose(s * c + A_ub.T @ r.y_ub + A_eq.T @ r.y_eq + r.z, 0.0, atol=tol)
+    assert np.all(r.y_ub >= -tol)
+    np.testing.assert_allclose(r.y_ub * (b_ub - A_ub @ r.x), 0.0, atol=tol)
+    at_lb, at_ub = np.abs(r.x - lb) <= tol, np.abs(r.x - ub) <= tol
+    assert np.all(r.z[~at_lb] >= -tol) and np.all(r.z[~at_ub] <= tol)
+    # strong duality: the objective equals the dual objective
+    finite_lb, finite_ub = np.isfinite(lb), np.isfinite(ub)
+    dual = -(b_ub @ r.y_ub + b_eq @ r.y_eq + lb[finite_lb] @ np.minimum(r.z[finite_lb], 0.0)
+             + ub[finite_ub] @ np.maximum(r.z[finite_ub], 0.0))
+    assert s * r.objective == pytest.approx(dual, abs=1e-6)
+
+
+def test_infeasible_and_unbounded_lps_report_it():
+    rng = np.random.default_rng(7)
+    A = rng.normal(size=(1, 3))
+    # a x <= -1 and -a x <= -1: a x <= -1 and a x >= 1
+    r = solve_lp(rng.normal(size=3), A_ub=np.vstack([A, -A]), b_ub=np.array([-1.0, -1.0]))
+    assert r.status == "infeasible" and not r.found and r.x is None and not r.has_duals
+    assert r.primal_residual() == np.inf and r.dual_residual() == np.inf and r.duality_gap() == np.inf
+    assert not r.is_optimal(1.0)
+    r = solve_lp(np.ones(2), A_eq=np.array([[1.0, 1.0], [1.0, 1.0]]), b_eq=np.array([0.0, 1.0]), lb=0.0)
+    assert r.status == "infeasible"
+    r = solve_lp(np.array([1.0, 0.0]), lb=0.0, maximize=True)
+    assert r.status == "unbounded" and r.objective == np.inf and r.primal_residual() == np.inf
+
+
+def test_known_duals_of_a_small_lp():
+    # max x + y s.t. x + 2y <= 4, 3x + y <= 6, x, y >= 0: x = (1.6, 1.2), shadow prices (0.4, 0.2)
+    r = solve_lp(np.array([1.0, 1.0]), A_ub=np.array([[1.0, 2.0], [3.0, 1.0]]), b_ub=np.array([4.0, 6.0]),
+                 lb=0.0, maximize=True)
+    np.testing.assert_allclose(r.x, [1.6, 1.2], atol=1e-9)
+    np.testing.assert_allclose(r.y_ub, [0.4, 0.2], atol=1e-9)
+    np.testing.assert_allclose(r.z, 0.0, atol=1e-9)
+    assert r.y_eq is not None and r.y_eq.shape == (0,)
+
+
+def test_warm_model_results_keep_the_data_they_were_solved_from():
+    rng = np.random.default_rng(11)
+    A_eq = rng.uniform(0.5, 1.0, size=(2, 4))
+    model = LPModel(4, A_eq=A_eq, b_eq=A_eq @ np.ones(4), lb=0.0, ub=3.0)
+    first = model.solve(rng.normal(size=4))
+    changed = A_eq.copy()
+    changed[1, 2] = 0.25
+    model.change_coefficients(np.array([1]), np.array([2]), np.array([0.25]))
+    model.set_col_bounds(0, 0.0, 0.0)
+    model.set_eq_rhs(changed @ np.array([0.0, 2.0, 2.0, 2.0]))  # feasible at that point
+    second = model.solve(rng.normal(size=4))
+    for r in (first, second):
+        assert r.found and r.is_optimal(1e-7)
+    assert first.problem is not None and second.problem is not None
+    np.testing.assert_array_equal(first.problem.b_eq, A_eq @ np.ones(4))
+    assert first.problem.A_eq[1, 2] == A_eq[1, 2] and second.problem.A_eq[1, 2] == 0.25
+    assert second.x is not None and second.x[0] == 0.0 and second.problem.ub[0] == 0.0
+
+
+def test_row_bound_lp_finds_points_and_reports_empty_polytopes():
+    H = np.array([[1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    lp = RowBoundLP(H, 1e-9)
+    v = lp.solve(np.array([0.5, -INF, -INF]), np.array([INF, INF, 0.0]))  # x >= 0.5, x + y <= 0
+    assert v is not None and v[0] >= 0.5 - 1e-9 and v[0] + v[1] <= 1e-9 and np.max(np.abs(v)) <= 1 + 1e-9
+    assert lp.solve(np.array([0.5, 0.6, -INF]), np.array([INF, INF, 1.0])) is None  # x + y >= 1.1 > 1
+    assert lp.solve(np.array([2.0, -INF, -INF]), np.array([INF, INF, INF])) is None  # outside the box
+    assert lp.count == 3

@@ -9,7 +9,7 @@ from closure_helpers import disk_scene, effective_grasp_matrix, full_forces, par
 
 from analysis.combination import CombinationParts, summarize
 from analysis.contacts import build_system
-from analysis.dafc import dafc_set
+from analysis.dafc import DAFCOracle, dafc_set
 from analysis.exceptions import EmptyTorqueSet, NotInDAFC
 from analysis.stationary import stationary_grasp
 from analysis.torques import TorqueSet, friction_uncertainty, torque_set
@@ -121,17 +121,23 @@ def test_directions_outside_dafc_raise() -> None:
 
 
 def test_empty_torque_set_is_really_empty() -> None:
-    """SSSSS (no redundancy, so the motion is fixed by the direction): its example direction is
-    in DAFC (positive work, eq. 22) yet no contact forces put the net wrench exactly along it
-    (W_3 of eq. 30): T is empty. Checked with scipy at the same motion."""
+    """SSSSS (no redundancy, so the motion is fixed by the direction): DAFC (positive work,
+    eq. 22) has members for which no contact forces put the net wrench exactly along the motion
+    (W_3 of eq. 30): there T is empty. Checked with scipy at the same motion. The example
+    direction of the combination is a member with a torque set."""
     p = parts_of(NAME, "SSSSS")
     assert p.ms.n_redundant == 0
     s = summarize(p)
     assert s.feasible and s.example_direction is not None
     g = stationary_grasp(p.system, p.sel, p.st, p.fs)
+    torque_set(p.system, p.sel, p.ms, p.st, p.fs, g, s.example_direction)  # realisable: no raise
+    oracle = DAFCOracle(p.system, p.sel, p.ms, p.st, p.fs)
+    empty = [t for t in map(oracle.test, dafc_set(oracle, samples=72).members()) if not oracle.realisable(t)]
+    assert empty, "SSSSS has DAFC members without a torque set"
+    direction = empty[0].direction
     with pytest.raises(EmptyTorqueSet):
-        torque_set(p.system, p.sel, p.ms, p.st, p.fs, g, s.example_direction)
-    u = p.ms.coordinates(s.example_direction)
+        torque_set(p.system, p.sel, p.ms, p.st, p.fs, g, direction)
+    u = p.ms.coordinates(direction)
     u /= np.linalg.norm(u)
     motion = p.ms.Phi_full @ u
     G = effective_grasp_matrix(p.system, p.sel, p.st.G_c, motion)
@@ -185,3 +191,48 @@ def test_friction_uncertainty_solves_the_paper_system() -> None:
                 assert fu.feasible and 0.0 < fu.lambdas[0] < 1.0
         with pytest.raises(ValueError, match="nu"):
             friction_uncertainty(p.system, p.sel, p.st, p.fs, ts, 1.5)
+
+
+def test_example_direction_prefers_a_realisable_member_ddsss() -> None:
+    """DDSSS: DAFC (22) has no W_3 condition, so some members have an empty torque set (32).
+    Realisability is checked against scipy, independently of the (LAPACK-chosen) signs of the
+    basis Lambda~_r: directions are built in the world frame. dr0 = (-0.985, 0, -0.171) is a
+    DAFC member (unbounded work: a recession ray of the force LP does work 1) whose T is
+    empty (no forces put the net wrench along dr0); (-0.985, 0, +0.171) has a T. The example
+    direction of the summary must be a member with a non-empty T, re-checked by scipy."""
+    p = parts_of(NAME, "DDSSS")
+    sy, ms, st, fs = p.system, p.ms, p.st, p.fs
+    oracle = p.oracle()
+
+    def scipy_t_status(dr: np.ndarray) -> tuple[int, int]:
+        """(DAFC sup status, T max-work status) by scipy for the motion the oracle tests."""
+        t = oracle.test(dr)
+        assert t.zeta_c is not None
+        motion = ms.Phi_full @ t.zeta_c
+        G = effective_grasp_matrix(sy, p.sel, st.G_c, motion)
+        d = motion[sy.M :]
+        Xi = st.Xi
+        dafc, _, _ = scipy_lp(d @ G, fs.C, np.zeros(fs.C.shape[0]), Xi.T @ G, -(Xi.T @ sy.w_ex), maximize=True)
+        Q = np.eye(sy.D) - np.outer(d, d)  # W_2 and W_3 of (30): w parallel to d
+        A_ub = np.vstack([fs.C, -(d @ G)[None, :]])
+        b_ub = np.r_[np.zeros(fs.C.shape[0]), d @ sy.w_ex]
+        tset, _, _ = scipy_lp(d @ G, A_ub, b_ub, Q @ G, -(Q @ sy.w_ex), maximize=True)
+        return dafc, tset
+
+    th = np.arctan2(0.1713667098442060, 0.9852073135930183)
+    for sign, realisable in ((-1.0, False), (1.0, True)):
+        dr = np.array([-np.cos(th), 0.0, sign * np.sin(th)])
+        t = oracle.test(dr)
+        assert t.member and t.work == np.inf
+        dafc, tset = scipy_t_status(dr)
+        assert dafc == 3  # unbounded positive work: a DAFC member
+        assert (tset in (0, 3)) == realisable and oracle.realisable(t) == realisable
+        if not realisable:
+            with pytest.raises(EmptyTorqueSet):
+                torque_set(sy, p.sel, ms, st, fs, stationary_grasp(sy, p.sel, st, fs), dr)
+    s = summarize(p)
+    assert s.feasible and s.example_direction is not None
+    assert scipy_t_status(s.example_direction)[1] in (0, 3)
+    _, ts = _torque_set("DDSSS")
+    res = ts.residuals(ts.f_c)
+    assert res["inequality"] <= TOL and res["equality"] <= TOL and res["work"] > 0.0

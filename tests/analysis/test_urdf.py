@@ -14,8 +14,9 @@ from scipy.optimize import linprog
 from analysis.contacts import build_system, tangent_basis
 from analysis.exceptions import SceneError
 from analysis.kinematics import HandKinematics, SerialChain, chain_from_finger
+from analysis.loader import load_scene, scene_from_dict
 from analysis.rotations import axis_angle_matrix, matrix_to_quat_wxyz, quat_wxyz_to_matrix
-from analysis.scene import Finger3D, FingerURDF, load_scene, scene_from_dict
+from analysis.scene import Finger3D, FingerURDF
 from analysis.urdf import UrdfFinger, example_robot_data_dir, resolve_urdf_path
 
 ROOT = Path(__file__).resolve().parents[2]

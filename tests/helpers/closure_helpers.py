@@ -18,7 +18,8 @@ from scipy.optimize import linprog
 
 from analysis.combination import CombinationParts
 from analysis.contacts import GraspSystem, Selection, all_combinations, build_system
-from analysis.scene import Scene, load_scene, scene_from_dict
+from analysis.loader import load_scene, scene_from_dict
+from analysis.scene import Scene
 
 Array = NDArray[np.float64]
 
