@@ -1,11 +1,15 @@
-"""Dependencies of the routes (``Annotated`` aliases): settings, store, workers, runner."""
+"""Dependencies of the routes (``Annotated`` aliases: settings, store, workers, runner) and the
+checks every scene-taking route makes (:func:`check_scene`)."""
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated
 
 from fastapi import Depends, Request
 
+from analysis.loader import check_geometry
+from analysis.scene import Scene
+from api.errors import ApiError
 from api.jobs import JobRunner
 from api.settings import Settings
 from api.store import JobStore
@@ -44,10 +48,16 @@ RunnerDep = Annotated[JobRunner | None, Depends(get_runner)]
 ExecutorNameDep = Annotated[str, Depends(get_executor_name)]
 
 
-def check_scene_size(scene: Any, settings: Settings) -> None:
-    """Scenes over ``max_contacts`` contacts: 413 with the limit."""
-    from api.errors import ApiError
+def check_scene(scene: Scene, settings: Settings) -> None:
+    """A request's scene, after the body's model validated its structure: its geometry (contact
+    points on their bodies and on the object, normals into it: 422 naming the field, as a scene
+    file gets) and its size (413 over ``max_contacts``)."""
+    check_geometry(scene)  # SceneError -> 422 located in "scene"
+    check_scene_size(scene, settings)
 
+
+def check_scene_size(scene: Scene, settings: Settings) -> None:
+    """Scenes over ``max_contacts`` contacts: 413 with the limit."""
     n = len(scene.contacts)
     if n > settings.max_contacts:
         raise ApiError(413, f"scene.contacts: {n} contacts; this server's limit is {settings.max_contacts} "

@@ -9,7 +9,7 @@
 * 413: too many contacts (``limit`` = ``max_contacts``) or request body too large
   (``limit`` = ``max_body_bytes``).
 * 404: unknown job. 409: result of an unfinished or failed job (``detail``: status, reason).
-* 501: the planner is not part of this build. 503: a worker crashed.
+* 503: a worker crashed.
 
 A job never turns an error into an HTTP status: it fails, and ``GET /plans/{id}`` says why
 (``error``: "solver time limit: ...", "time limit: ...", "analysis: no stationary grasp ...").
@@ -98,8 +98,6 @@ def task_error_response(e: TaskError) -> JSONResponse:
         return validation_response(errs or [{"loc": loc, "msg": msg, "type": "scene"}])
     if e.type in ("analysis", "solver_time_limit"):
         return JSONResponse(_body(e.message, [{"loc": [], "msg": e.message, "type": e.type}]), status_code=422)
-    if e.type == "planner_unavailable":
-        return JSONResponse(_body(e.message), status_code=501)
     if e.type == "worker_died":
         return JSONResponse(_body(f"the analysis worker stopped unexpectedly: {e.message}"), status_code=503)
     log.error("internal task error: %s", e.message)

@@ -139,6 +139,6 @@ class JobRunner:
 
 def _reason(e: TaskError) -> str:
     prefix = {"scene": "invalid input", "analysis": "analysis", "solver_time_limit": "solver time limit",
-              "planner_unavailable": "planner unavailable", "internal": "internal error"}.get(e.type, e.type)
+              "internal": "internal error"}.get(e.type, e.type)
     return f"{prefix}: {e.message}"
 

@@ -126,7 +126,6 @@ class Health(BaseModel):
     analysis_workers: int
     job_workers: int
     jobs: dict[str, int]
-    planner_available: bool
 
 
 class ErrorItem(BaseModel):

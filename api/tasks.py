@@ -1,6 +1,11 @@
 """The work itself, run inside worker processes (or Ray tasks): pure functions of JSON-ready
 payloads, returning JSON-ready results. They re-validate the scene (cheap) so a worker never
-trusts a pickled object, and raise the project's exceptions, which the caller maps."""
+trusts a pickled object, and raise the project's exceptions, which the caller maps.
+
+Worker processes (spawned, so they import afresh) load this module before saying they are ready,
+and with it the analysis: a fresh worker is warm before its first request. The planner (with OMPL,
+about 1.5 s to import) loads on a worker's first plan, so the analysis pool restarts quickly.
+"""
 
 from __future__ import annotations
 
@@ -10,39 +15,19 @@ from typing import Any
 
 import numpy as np
 
+from analysis.combination import analyze_combination
+from analysis.contacts import build_system
+from analysis.dafc import SEMANTICS
+from analysis.enumerate import enumerate_combinations
+from analysis.loader import scene_from_dict
+
 Progress = Callable[[float, str], None]
 
 #: Job kinds and the task each runs.
 KINDS = ("analysis", "enumeration", "plan")
 
 
-class PlannerUnavailable(RuntimeError):
-    """``planner.plan`` is not part of this build yet."""
-
-
-_PLAN = "plan"
-
-
-def planner_entry() -> Callable[..., Any] | None:
-    """``planner.plan`` once the planner exports it, else None."""
-    import importlib
-
-    try:
-        mod = importlib.import_module("planner")
-    except ImportError:
-        return None
-    fn = getattr(mod, _PLAN, None)
-    return fn if callable(fn) else None
-
-
-def planner_available() -> bool:
-    return planner_entry() is not None
-
-
 def _system(payload: dict[str, Any]) -> tuple[Any, Any]:
-    from analysis.contacts import build_system
-    from analysis.scene import scene_from_dict
-
     scene = scene_from_dict(payload["scene"])
     return scene, build_system(scene)
 
@@ -50,8 +35,6 @@ def _system(payload: dict[str, Any]) -> tuple[Any, Any]:
 def run_analysis(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
     """``POST /analyses``: the full report of one combination, or the table of all of them."""
     if payload.get("combination"):
-        from analysis.combination import analyze_combination
-
         t0 = time.perf_counter()
         scene, system = _system(payload)
         direction = payload.get("direction")
@@ -65,9 +48,6 @@ def run_analysis(payload: dict[str, Any], progress: Progress | None = None) -> d
 
 def run_enumeration(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
     """Every combination's summary (feasible, DAFC dimension, an example direction)."""
-    from analysis.dafc import SEMANTICS
-    from analysis.enumerate import enumerate_combinations
-
     t0 = time.perf_counter()
     scene, system = _system(payload)
 
@@ -86,11 +66,7 @@ def run_enumeration(payload: dict[str, Any], progress: Progress | None = None) -
 
 def run_plan(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
     """A plan from the scene's grasp to the goal (``planner.plan``)."""
-    plan = planner_entry()
-    if plan is None:
-        raise PlannerUnavailable("the planner is not available in this build (planner.plan missing)")
-    from analysis.scene import scene_from_dict
-    from planner.goals import Goal
+    from planner import Goal, plan  # on a worker's first plan only (see the module docstring)
 
     t0 = time.perf_counter()
     scene = scene_from_dict(payload["scene"])
@@ -111,9 +87,3 @@ TASKS: dict[str, Callable[[dict[str, Any], Progress | None], dict[str, Any]]] = 
 def run_task(kind: str, payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
     return TASKS[kind](payload, progress)
 
-
-def warm_up() -> None:
-    """Import the heavy modules once per worker so the first request does not pay for them."""
-    import analysis.combination
-    import analysis.enumerate
-    import analysis.scene  # noqa: F401

@@ -29,7 +29,7 @@ ProgressCallback = Callable[[float, str], None]
 class TaskError(Exception):
     """A task ended with an error. ``type`` is one of: ``scene`` (bad input, ``loc`` names the
     field), ``analysis`` (the mathematics says no, e.g. no stationary grasp), ``solver_time_limit``,
-    ``planner_unavailable``, ``worker_died``, ``internal``."""
+    ``worker_died``, ``internal``."""
 
     def __init__(self, type: str, message: str, loc: list[Any] | None = None,
                  errors: list[dict[str, Any]] | None = None):
@@ -53,7 +53,6 @@ class TaskCancelled(Exception):
 def classify(e: BaseException) -> tuple[str, str, list[Any] | None, list[dict[str, Any]] | None]:
     """The transportable form of an exception raised by a task."""
     from analysis.exceptions import CTPError, SceneError, SolverTimeLimit
-    from api.tasks import PlannerUnavailable
 
     if isinstance(e, SceneError):
         errors = [{"loc": list(err.get("loc", [])), "msg": str(err.get("msg", "")), "type": str(err.get("type", ""))}
@@ -63,8 +62,6 @@ def classify(e: BaseException) -> tuple[str, str, list[Any] | None, list[dict[st
         return "solver_time_limit", str(e), None, None
     if isinstance(e, CTPError):
         return "analysis", str(e), None, None
-    if isinstance(e, PlannerUnavailable):
-        return "planner_unavailable", str(e), None, None
     if e.__class__.__name__ == "ValidationError":  # pydantic (a goal re-validated in the worker)
         errs = e.errors()  # type: ignore[attr-defined]
         first = errs[0] if errs else {"loc": (), "msg": str(e)}
@@ -77,9 +74,8 @@ def classify(e: BaseException) -> tuple[str, str, list[Any] | None, list[dict[st
 
 def _worker_main(conn: Connection) -> None:  # pragma: no cover - runs in the child process
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the server, which stops us
-    from api.tasks import run_task, warm_up
+    from api.tasks import run_task  # loads the analysis before the worker says it is ready
 
-    warm_up()
     conn.send(("ready",))
     while True:
         try:

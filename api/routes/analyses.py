@@ -6,7 +6,7 @@ from typing import Any
 
 from fastapi import APIRouter
 
-from api.deps import AnalysisPoolDep, SettingsDep
+from api.deps import AnalysisPoolDep, SettingsDep, check_scene
 from api.errors import ApiError
 from api.schemas import AnalysisCreate, AnalysisPublic, ErrorBody
 
@@ -26,10 +26,8 @@ async def create_analysis(body: AnalysisCreate, settings: SettingsDep, pool: Ana
 
     Runs in a worker process; past ``request_time_limit`` seconds the worker is stopped and the
     answer is 422 with ``limit`` (large enumerations belong in ``POST /enumerations``)."""
-    from api.deps import check_scene_size
-
     scene = body.scene
-    check_scene_size(scene, settings)
+    check_scene(scene, settings)
     if body.combination is not None and len(body.combination) != len(scene.contacts):
         raise ApiError(422, f"combination: '{body.combination}' has {len(body.combination)} letters; the scene "
                             f"has {len(scene.contacts)} contacts",

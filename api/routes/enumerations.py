@@ -7,7 +7,7 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Response
 
-from api.deps import RunnerDep, SettingsDep, StoreDep, check_scene_size
+from api.deps import RunnerDep, SettingsDep, StoreDep, check_scene
 from api.routes import _jobs
 from api.schemas import AnalysisPublic, EnumerationCreate, EnumerationPublic, ErrorBody, JobList, JobStatus
 
@@ -20,7 +20,7 @@ KIND, WHAT = "enumeration", "enumeration"
 def create_enumeration(body: EnumerationCreate, settings: SettingsDep, store: StoreDep, runner: RunnerDep,
                        response: Response) -> dict[str, Any]:
     """Queue the enumeration of every combination; 202 with the job."""
-    check_scene_size(body.scene, settings)
+    check_scene(body.scene, settings)
     limit = _jobs.time_limit(body.time_limit, settings.job_time_limit)
     job = _jobs.submit(store, runner, KIND, {"scene": body.scene.model_dump(mode="json"), "time_limit": limit})
     response.headers["Location"] = f"/enumerations/{job.id}"

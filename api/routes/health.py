@@ -6,7 +6,6 @@ from fastapi import APIRouter
 
 from api.deps import AnalysisPoolDep, ExecutorNameDep, SettingsDep, StoreDep
 from api.schemas import Health
-from api.tasks import planner_available
 
 router = APIRouter(tags=["health"])
 
@@ -23,5 +22,4 @@ def health(settings: SettingsDep, store: StoreDep, pool: AnalysisPoolDep, execut
     """Liveness and what this server runs on; ``jobs`` counts jobs by status."""
     url = store.engine.url
     return Health(status="ok", version=_version(), database=url.get_backend_name(), executor=executor,
-                  analysis_workers=pool.alive(), job_workers=settings.job_workers, jobs=store.counts(),
-                  planner_available=planner_available())
+                  analysis_workers=pool.alive(), job_workers=settings.job_workers, jobs=store.counts())

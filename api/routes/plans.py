@@ -6,23 +6,21 @@ from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Response
 
-from api.deps import RunnerDep, SettingsDep, StoreDep, check_scene_size
+from api.deps import RunnerDep, SettingsDep, StoreDep, check_scene
 from api.errors import ApiError
 from api.routes import _jobs
 from api.schemas import ErrorBody, JobList, JobStatus, PlanCreate, PlanPublic
-from api.tasks import planner_available
 
 router = APIRouter(prefix="/plans", tags=["plans"])
 KIND, WHAT = "plan", "plan"
 
 
 @router.post("", status_code=202, response_model=PlanPublic,
-             responses={413: {"model": ErrorBody}, 422: {"model": ErrorBody},
-                        501: {"model": ErrorBody, "description": "the planner is not part of this build"}})
+             responses={413: {"model": ErrorBody}, 422: {"model": ErrorBody}})
 def create_plan(body: PlanCreate, settings: SettingsDep, store: StoreDep, runner: RunnerDep,
                 response: Response) -> dict[str, Any]:
     """Queue a plan from the scene's grasp to ``goal``; 202 with the job (``url`` to poll)."""
-    check_scene_size(body.scene, settings)
+    check_scene(body.scene, settings)
     if body.goal.combination is not None and len(body.goal.combination) != len(body.scene.contacts):
         raise ApiError(422, f"goal.combination: '{body.goal.combination}' has {len(body.goal.combination)} "
                             f"letters; the scene has {len(body.scene.contacts)} contacts",
@@ -32,9 +30,6 @@ def create_plan(body: PlanCreate, settings: SettingsDep, store: StoreDep, runner
         raise ApiError(422, f"goal.pose: has {len(body.goal.pose)} values; a {body.scene.dim}-D object needs "
                             f"{body.scene.D}",
                        errors=[{"loc": ["goal", "pose"], "msg": f"needs {body.scene.D} values", "type": "value_error"}])
-    if not planner_available():
-        raise ApiError(501, "the planner is not available in this build yet (planner.plan); "
-                            "POST /enumerations runs analysis jobs")
     limit = _jobs.time_limit(body.time_limit, settings.job_time_limit)
     request = {"scene": body.scene.model_dump(mode="json"), "goal": body.goal.model_dump(mode="json"),
                "time_limit": limit}

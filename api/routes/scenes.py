@@ -8,7 +8,9 @@ from typing import Annotated, Any
 import numpy as np
 from fastapi import APIRouter, File, UploadFile
 
-from analysis.scene import Scene, parse_scene_text
+from analysis.kinematics import HandKinematics
+from analysis.loader import check_geometry, parse_scene_text
+from analysis.scene import Scene
 from api.deps import SettingsDep
 from api.errors import ApiError
 from api.schemas import ErrorBody, ExampleScene, GeometryCreate, _check_files
@@ -66,9 +68,8 @@ async def upload_scene(file: Annotated[UploadFile, File(description="a scene, .j
 def scene_geometry(body: GeometryCreate) -> dict[str, Any]:
     """World coordinates to draw: each finger's links (segments and radii) for the scene's ``q``
     or for each of ``configurations``, fixed bodies, object, contacts (with friction-cone half angle)."""
-    from analysis.kinematics import HandKinematics
-
     scene: Scene = body.scene
+    check_geometry(scene)  # SceneError -> 422 naming the field
     hand = HandKinematics.from_scene(scene)
     confs = body.configurations if body.configurations is not None else [list(map(float, hand.q0))]
     for k, q in enumerate(confs):

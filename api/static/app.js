@@ -7,7 +7,7 @@ const COLORS = { F: "#2a9d8f", S: "#e9a03b", D: "#d1495b", N: "#577590" };
 const state = {
   scene: null, geometry: null, rows: [], combination: null, report: null,
   view: { yaw: -0.6, pitch: 0.45 }, dafcView: { yaw: -0.7, pitch: 0.5 },
-  extraBounds: [], job: null, pollTimer: null, plan: null, frames: [], frameIndex: 0, playTimer: null, plannerReady: false,
+  extraBounds: [], job: null, pollTimer: null, plan: null, frames: [], frameIndex: 0, playTimer: null,
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -501,9 +501,7 @@ async function init() {
   });
   try {
     const h = await api("GET", "/health");
-    state.plannerReady = h.planner_available;
-    $("health").textContent = `jobs on ${h.executor} · ${h.database} · planner ${h.planner_available ? "ready" : "not available"}`;
-    if (!h.planner_available) { $("plan-btn").disabled = true; $("plan-btn").title = "the planner is not part of this build yet"; }
+    $("health").textContent = `jobs on ${h.executor} · ${h.database} · version ${h.version}`;
   } catch (e) { $("health").textContent = "server unreachable"; }
   const examples = await api("GET", "/scenes/examples");
   const sel = $("example-select");

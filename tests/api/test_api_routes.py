@@ -16,9 +16,9 @@ from service_helpers import example, settings_for, wait_for
 from analysis.combination import analyze_combination
 from analysis.contacts import build_system
 from analysis.enumerate import enumerate_combinations
-from analysis.scene import scene_from_dict
+from analysis.exceptions import SceneError
+from analysis.loader import scene_from_dict
 from api.main import create_app
-from api.tasks import planner_available
 
 PLANAR = example("planar_disk_envelope")
 
@@ -32,7 +32,6 @@ def test_health(client: TestClient) -> None:
     body = r.json()
     assert body["status"] == "ok" and body["database"] == "sqlite"
     assert body["analysis_workers"] == 1 and body["executor"] == "processes (1)"
-    assert body["planner_available"] == planner_available()
 
 
 def test_examples_are_valid_scenes(client: TestClient) -> None:
@@ -278,15 +277,11 @@ def test_plan_goal_validation(client: TestClient) -> None:
     r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "pose", "pose": [0, 0, 0, 0, 0, 0]}})
     assert r.status_code == 422 and r.json()["detail"].startswith("goal.pose:")
     r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}, "time_limit": 1e9})
-    assert r.status_code in (422, 501)
+    assert r.status_code == 422 and r.json()["detail"].startswith("time_limit")
 
 
 def test_plan_life_cycle(client: TestClient) -> None:
     r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}})
-    if not planner_available():
-        assert r.status_code == 501 and "planner" in r.json()["detail"]
-        assert client.get("/plans").json()["count"] == 0
-        return
     assert r.status_code == 202, r.text
     done = wait_for(client, r.json()["url"], timeout=120)
     assert done["status"] in ("succeeded", "failed"), done
@@ -350,3 +345,25 @@ def test_cancel_running_and_queued_jobs(tight: TestClient) -> None:
     nxt = tight.post("/enumerations", json={"scene": PLANAR}).json()
     assert wait_for(tight, nxt["url"])["status"] == "succeeded"
     assert wait_for(tight, queued["url"])["status"] == "cancelled"
+
+
+# -- geometric scene errors: the same field and message as a scene file gets --------------------
+
+
+@pytest.mark.parametrize("route", ["/analyses", "/enumerations", "/plans", "/scenes/geometry"])
+def test_geometric_scene_errors_are_422_naming_the_field(client: TestClient, route: str) -> None:
+    bad = copy.deepcopy(PLANAR)
+    bad["contacts"][1]["point"][0] += 0.05  # off the surface of its link
+    with pytest.raises(SceneError) as expected:
+        scene_from_dict(bad)
+    body: dict[str, object] = {"scene": bad}
+    if route == "/plans":
+        body["goal"] = {"type": "active"}
+    jobs_before = client.get(route).json()["count"] if route in ("/enumerations", "/plans") else 0
+    r = client.post(route, json=body)
+    assert r.status_code == 422, r.text
+    out = r.json()
+    assert out["detail"] == f"scene.{expected.value}"
+    assert out["errors"][0]["loc"] == ["scene", "contacts", 1, "point"]
+    if route in ("/enumerations", "/plans"):  # refused at the door: no job was stored
+        assert client.get(route).json()["count"] == jobs_before

@@ -11,8 +11,6 @@ from pathlib import Path
 import pytest
 from service_helpers import ROOT, free_port, start_server, stop_server
 
-from api.tasks import planner_available
-
 CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = ROOT / "test-artifacts"
 FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
@@ -70,19 +68,19 @@ def test_dashboard_in_chromium(tmp_path: Path) -> None:
             page.locator("#combo-table tbody tr").nth(1).click()
             expect(page.locator("#report-title")).to_contain_text("feasible", timeout=30_000)
             # a job, watched live until it finishes
-            if planner_available():
-                page.select_option("#goal-select", "active")
-                page.click("#plan-btn")
-                expect(page.locator("#job-status[data-status='succeeded']")).to_have_count(1, timeout=180_000)
-                expect(page.locator("#player")).to_be_visible()
-                if page.locator("#steps li").count():
-                    page.click("#play-btn")
-                    page.wait_for_timeout(500)
-                    assert page.locator("#torque-bars rect.torque-bar").count() > 0
-            else:
-                page.click("#enum-btn")
-                expect(page.locator("#job-status[data-status='succeeded']")).to_have_count(1, timeout=120_000)
-                expect(page.locator("#analysis-status")).to_contain_text("combinations feasible")
+            page.select_option("#goal-select", "active")
+            page.click("#plan-btn")
+            expect(page.locator("#job-status[data-status='succeeded']")).to_have_count(1, timeout=180_000)
+            expect(page.locator("#player")).to_be_visible()
+            assert page.locator("#steps li").count() > 0  # the planar grasp has a plan to active closure
+            page.click("#play-btn")
+            page.wait_for_timeout(500)
+            assert page.locator("#torque-bars rect.torque-bar").count() > 0
+            # an enumeration job, watched the same way
+            page.click("#enum-btn")
+            expect(page.locator("#job-status")).to_contain_text("enumeration", timeout=30_000)
+            expect(page.locator("#job-status[data-status='succeeded']")).to_have_count(1, timeout=120_000)
+            expect(page.locator("#analysis-status")).to_contain_text("combinations feasible")
             ARTIFACTS.mkdir(exist_ok=True)
             shot = ARTIFACTS / "dashboard.png"
             page.screenshot(path=str(shot), full_page=True)

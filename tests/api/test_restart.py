@@ -10,8 +10,6 @@ import httpx
 import pytest
 from service_helpers import example, free_port, kill_tree, start_server, stop_server
 
-from api.tasks import planner_available
-
 
 @pytest.mark.slow
 def test_jobs_survive_a_killed_server(tmp_path: Path) -> None:
@@ -26,10 +24,9 @@ def test_jobs_survive_a_killed_server(tmp_path: Path) -> None:
             r = httpx.post(f"{base}/enumerations", json={"scene": scene}, timeout=30)
             assert r.status_code == 202, r.text
             ids.append(r.json()["url"])
-        if planner_available():
-            r = httpx.post(f"{base}/plans", json={"scene": planar, "goal": {"type": "active"}}, timeout=30)
-            assert r.status_code == 202, r.text
-            ids.append(r.json()["url"])
+        r = httpx.post(f"{base}/plans", json={"scene": planar, "goal": {"type": "active"}}, timeout=30)
+        assert r.status_code == 202, r.text
+        ids.append(r.json()["url"])
         # wait until the first job is running, then crash everything
         deadline = time.monotonic() + 60
         while httpx.get(base + ids[0], timeout=10).json()["status"] != "running":

@@ -12,7 +12,7 @@ from typer.testing import CliRunner
 
 from analysis.contacts import build_system
 from analysis.enumerate import enumerate_combinations
-from analysis.scene import load_scene
+from analysis.loader import load_scene
 from ctp.cli import app
 
 runner = CliRunner()
@@ -67,22 +67,17 @@ def test_batch_bad_arguments_exit_2(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_batch_on_a_local_ray_instance(tmp_path: Path) -> None:
     ray = pytest.importorskip("ray")
-    from api.tasks import planner_available
-
     scenes = _scenes(tmp_path, ("planar_disk_envelope",))
     (scenes / "broken.json").write_text(json.dumps({"dim": 2, "contacts": []}))
     out = tmp_path / "results"
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
     try:
-        args = ["--goal", "active", "--time-limit", "60"] if planner_available() else ["--enumerate"]
+        args = ["--goal", "active", "--time-limit", "60"]
         r = runner.invoke(app, ["batch", str(scenes), *args, "--out", str(out), "--ray", "local"])
         assert r.exit_code == 1, r.output  # the broken scene failed
         assert json.loads((out / "broken.json").read_text())["status"] == "failed"
         planar = json.loads((out / "planar_disk_envelope.json").read_text())
-        if planner_available():
-            assert planar["kind"] == "plan" and planar["status"] == "succeeded" and planar["steps"] > 0
-            assert planar["result"]["steps"][0]["kind"]
-        else:
-            assert planar["feasible"] == _feasible("planar_disk_envelope")
+        assert planar["kind"] == "plan" and planar["status"] == "succeeded" and planar["steps"] > 0
+        assert planar["result"]["steps"][0]["kind"]
     finally:
         ray.shutdown()
