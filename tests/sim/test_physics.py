@@ -16,7 +16,7 @@ import pytest
 from analysis.combination import analyze_combination
 from analysis.contacts import build_system
 from analysis.geometry import object_size
-from analysis.scene import load_scene
+from analysis.loader import load_scene
 from sim.torque_replay import simulate_torques
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"

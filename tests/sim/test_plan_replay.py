@@ -12,8 +12,11 @@ import pytest
 from typer.testing import CliRunner
 
 from analysis.geometry import object_size
+from analysis.kinematics import HandKinematics
 from analysis.scene import Scene
 from ctp.cli import app
+from planner.plan import Plan
+from sim.final_grasp import final_holding_torque
 from sim.plan_replay import simulate_plan
 from sim.step_replay import replay_plan
 
@@ -143,11 +146,8 @@ def test_ctp_simulate_missing_plan_file_exits_2(tmp_path) -> None:  # type: igno
 def test_final_holding_torque_rebuilt_from_the_file_equals_the_planners(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
     """For plan files without ``final_holding_torque`` the final grasp is rebuilt from the file
     (points, bodies, object-surface normals): its tau_st (18) is the planner's."""
-    from analysis.kinematics import HandKinematics
-    from sim.plan_replay import final_holding_torque, parse_plan
-
     hand = HandKinematics.from_scene(planar_scene)
-    steps = parse_plan(planar_plan.to_json(), planar_scene, hand)
+    steps = Plan.from_json(planar_plan.to_json(), planar_scene, hand).steps
     rebuilt = final_holding_torque(planar_scene, hand, steps[-1])
     assert planar_plan.final_tau is not None and rebuilt is not None
     np.testing.assert_allclose(rebuilt, planar_plan.final_tau, atol=1e-8)

@@ -1,7 +1,6 @@
-"""Physics cross-check in MuJoCo (analysis/simulate.py).
+"""Physics cross-check in MuJoCo (sim/torque_replay.py).
 
-Known answers: the MJCF reproduces the scene's kinematics (link end points for random ``q``) and
-contact geometry (every scene contact just touching at the scene configuration); a disk left
+Known answers (the MJCF itself: ``test_mjcf.py``; the report: ``test_report.py``): a disk left
 alone on the palm stays put with the palm carrying its weight; a stationary grasp (eq. 18) from
 :mod:`analysis.stationary` holds the object still with every loaded contact sticking, and the
 contact forces MuJoCo reports balance both the external wrench and the joint torques; pushes
@@ -11,10 +10,8 @@ kinetic friction ``mu N``) move the object in that direction, in 2-D and 3-D.
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
-import mujoco
 import numpy as np
 import pytest
 
@@ -22,108 +19,18 @@ from analysis._types import Array
 from analysis.contacts import build_system, selection
 from analysis.exceptions import CombinationError, SceneError
 from analysis.friction import friction_set
-from analysis.kinematics import HandKinematics
-from analysis.scene import Scene, load_scene, scene_from_dict
+from analysis.geometry import object_size
+from analysis.loader import load_scene, scene_from_dict
+from analysis.scene import Scene
 from analysis.statics import statics
 from analysis.stationary import stationary_grasp
-from sim.torque_replay import (
-    DEFAULT_PARAMS,
-    build_mjcf,
-    build_model,
-    damping,
-    finger_qpos_addresses,
-    fixed_geom_name,
-    format_report,
-    link_body_name,
-    link_site_names,
-    object_size,
-    reset_to_scene,
-    simulate_torques,
-)
+from sim.mjcf import damping
+from sim.report import format_report
+from sim.torque_replay import simulate_torques
 
 EXAMPLES = Path(__file__).parents[2] / "examples"
 PLANAR = EXAMPLES / "planar_disk_envelope.json"
 SPHERE = EXAMPLES / "sphere_four_finger_palm.json"
-ALLEGRO = EXAMPLES / "allegro_right_box.json"
-
-
-def _geom_of(hand: HandKinematics, body: str) -> str:
-    ref = hand.resolve_body(body)
-    assert ref is not None
-    if ref.finger is None:
-        return fixed_geom_name(ref.name)
-    return link_body_name(hand.fingers[ref.finger].name, ref.link)
-
-
-# --------------------------------------------------------------------------------------------
-# The MJCF is the scene
-
-
-@pytest.mark.parametrize("path", [PLANAR, SPHERE, ALLEGRO], ids=["planar", "sphere", "allegro-urdf"])
-def test_link_end_points_match_kinematics(path: Path) -> None:
-    """MuJoCo's sites at the link ends equal ``HandKinematics.body_segment`` for random ``q``:
-    same chain, same joint axes, same ``q`` convention (also for URDF fingers, whose tip links
-    hang on fixed joints)."""
-    scene = load_scene(path)
-    hand = HandKinematics.from_scene(scene)
-    model = build_model(scene)
-    data = mujoco.MjData(model)
-    qadr = finger_qpos_addresses(model, scene)  # (M,)
-    rng = np.random.default_rng(7)
-    for _ in range(5):
-        q = hand.q0 + rng.uniform(-1.5, 1.5, size=hand.M)  # (M,)
-        data.qpos[qadr] = q
-        mujoco.mj_kinematics(model, data)
-        for f in hand.fingers:
-            for k, label in enumerate(f.body_names()):
-                ref = hand.resolve_body(label)
-                assert ref is not None
-                a, b = hand.body_segment(ref, q)  # (d,), (d,)
-                site_a, site_b = link_site_names(f.name, k)
-                np.testing.assert_allclose(data.site(site_a).xpos[: scene.dim], a, atol=1e-12)
-                np.testing.assert_allclose(data.site(site_b).xpos[: scene.dim], b, atol=1e-12)
-                if scene.dim == 2:  # planar chains stay in the plane
-                    assert abs(data.site(site_b).xpos[2]) < 1e-12
-
-
-@pytest.mark.parametrize("path", [PLANAR, SPHERE], ids=["planar", "sphere"])
-def test_scene_configuration_and_contacts_touch(path: Path) -> None:
-    """At the keyframe the finger qpos is the scene's q, the object is at its pose, and every
-    scene contact is exactly touching: geom distance 0, MuJoCo's contact at ``p + eps n`` with
-    normal ``n`` (hand -> object)."""
-    scene = load_scene(path)
-    hand = HandKinematics.from_scene(scene)
-    model = build_model(scene)
-    data = mujoco.MjData(model)
-    reset_to_scene(model, data)
-    np.testing.assert_array_equal(data.qpos[finger_qpos_addresses(model, scene)], hand.q0)
-    np.testing.assert_allclose(data.body("object").xpos[: scene.dim], scene.object.pose.position, atol=1e-15)
-    eps = DEFAULT_PARAMS.eps_rel * object_size(scene)
-    obj = model.geom("object").id
-    fromto = np.zeros(6)
-    for c in scene.contacts:
-        g = model.geom(_geom_of(hand, c.body)).id
-        assert abs(mujoco.mj_geomDistance(model, data, g, obj, 1.0, fromto)) < 1e-9
-        p, n = np.zeros(3), np.zeros(3)
-        p[: scene.dim], n[: scene.dim] = c.point, c.normal
-        found = []
-        for i in range(data.ncon):
-            con = data.contact[i]
-            if {int(con.geom1), int(con.geom2)} == {g, obj}:
-                sign = 1.0 if int(con.geom2) == obj else -1.0
-                found.append((np.array(con.pos), sign * con.frame[:3]))
-        assert len(found) == 1, c.body
-        pos, normal = found[0]
-        np.testing.assert_allclose(pos, p + eps * n, atol=1e-9)
-        np.testing.assert_allclose(normal, n, atol=1e-9)
-
-
-def test_mjcf_is_text_with_pairs_and_motors() -> None:
-    scene = load_scene(PLANAR)
-    xml = build_mjcf(scene)
-    assert xml.count("<pair ") == 1 + 4  # palm + every link
-    assert xml.count("<motor ") == 4
-    assert 'gravity="0 0 0"' in xml
 
 
 # --------------------------------------------------------------------------------------------
@@ -321,7 +228,7 @@ def test_disagreement_is_reported() -> None:
 
 
 # --------------------------------------------------------------------------------------------
-# Dropping, inputs, report
+# Dropping, inputs
 
 
 def test_object_pulled_away_is_dropped() -> None:
@@ -351,13 +258,3 @@ def test_bad_inputs() -> None:
         simulate_torques(scene, np.zeros(4), duration=0.0)
     with pytest.raises(CombinationError):
         simulate_torques(scene, np.zeros(4), duration=0.01, combination="FFF")
-
-
-def test_report_lists_every_contact() -> None:
-    scene = load_scene(PLANAR)
-    params = dataclasses.replace(DEFAULT_PARAMS, ramp_time=0.002)
-    r = simulate_torques(scene, np.zeros(4), duration=0.01, combination="DDDDF", params=params)
-    text = format_report(r)
-    for c in scene.contacts:
-        assert c.body in text
-    assert "dtheta" in text and "all contacts agree" in text
