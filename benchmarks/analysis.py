@@ -1,4 +1,4 @@
-"""Speed of the closure analysis (issue: analysis core). Prints figures and the machine.
+"""Speed of the closure analysis. Prints figures and the machine.
 
     .venv/bin/python benchmarks/analysis.py            # all figures
     .venv/bin/python benchmarks/analysis.py --quick    # skip the 3^9 enumeration
@@ -28,7 +28,7 @@ from machine import machine  # noqa: E402
 from analysis.combination import analyze_combination  # noqa: E402
 from analysis.contacts import build_system  # noqa: E402
 from analysis.enumerate import enumerate_combinations  # noqa: E402
-from analysis.scene import load_scene, scene_from_dict  # noqa: E402
+from analysis.loader import load_scene, scene_from_dict  # noqa: E402
 
 
 def cpu_seconds() -> float:

@@ -29,8 +29,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from analysis.contacts import GraspSystem, build_system, system_from_arrays  # noqa: E402
+from analysis.loader import load_scene  # noqa: E402
 from analysis.modes import ModeEnumeration, enumerate_modes  # noqa: E402
-from analysis.scene import load_scene  # noqa: E402
 
 Array = NDArray[np.float64]
 EXAMPLES = ROOT / "examples"

@@ -1,4 +1,4 @@
-"""Speed of the contact-state planner (issue 3). Prints figures and the machine.
+"""Speed of the contact-state planner. Prints figures and the machine.
 
     .venv/bin/python benchmarks/planning.py                 # planar example (target < 5 s)
     .venv/bin/python benchmarks/planning.py --sphere        # also the 3-D sphere (target < 30 s)
@@ -23,7 +23,7 @@ sys.path.insert(0, str(ROOT))
 
 from machine import machine  # noqa: E402
 
-from analysis.scene import load_scene  # noqa: E402
+from analysis.loader import load_scene  # noqa: E402
 from planner import Goal, plan  # noqa: E402
 
 

@@ -1,4 +1,4 @@
-"""Loopback load test of the service (issue: service). Prints latency percentiles, errors and the machine.
+"""Loopback load test of the service. Prints latency percentiles, errors and the machine.
 
 Starts ``uvicorn api.main:app`` on 127.0.0.1 with a fresh SQLite store, then sends N
 ``POST /analyses`` requests from C concurrent clients and reports p50/p95/max latency, the

@@ -19,9 +19,15 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from pydantic import ValidationError
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
+
+from analysis.exceptions import CTPError
+from analysis.loader import load_scene
+from api.tasks import run_enumeration
+from planner import Goal, plan
 
 SCENE_SUFFIXES = (".json", ".yaml", ".yml")
 DONE = ("succeeded", "no plan", "failed")
@@ -29,8 +35,6 @@ DONE = ("succeeded", "no plan", "failed")
 
 def parse_goal(text: str) -> dict[str, Any]:
     """``active``, ``passive``, ``combination:FSDD`` or ``pose:x,y,theta[,...]``."""
-    from planner.goals import Goal
-
     kind, _, arg = text.partition(":")
     data: dict[str, Any] = {"type": kind}
     if kind == "combination":
@@ -42,25 +46,17 @@ def parse_goal(text: str) -> dict[str, Any]:
 
 def run_one(path: str, goal: dict[str, Any] | None, time_limit: float | None) -> dict[str, Any]:
     """Plan (``goal``) or enumerate one scene file; never raises (the error is the record)."""
-    from analysis.exceptions import CTPError
-    from analysis.scene import load_scene
-
     t0 = time.perf_counter()
     record: dict[str, Any] = {"scene_file": Path(path).name, "kind": "plan" if goal else "enumeration"}
     try:
         scene = load_scene(path)
         record["scene"] = scene.name
         if goal is not None:
-            from planner import plan
-            from planner.goals import Goal
-
             result = plan(scene, Goal.model_validate(goal), time_limit=time_limit).to_json()
             record["status"] = "succeeded" if result.get("found") else "no plan"
             record["steps"] = len(result.get("steps", []))
             record["reason"] = result.get("reason")
         else:
-            from api.tasks import run_enumeration
-
             result = run_enumeration({"scene": scene.model_dump(mode="json")})
             record["status"] = "succeeded"
             record["feasible"] = result["feasible"]
@@ -112,7 +108,7 @@ def _local(todo: list[Path], goal: dict[str, Any] | None, time_limit: float | No
 
 def _ray(todo: list[Path], goal: dict[str, Any] | None, time_limit: float | None,
          address: str) -> Iterator[tuple[Path, dict[str, Any]]]:
-    import ray
+    import ray  # only with --ray: it takes about 4 s to import
 
     if not ray.is_initialized():
         ray.init(address=None if address == "local" else address, ignore_reinit_error=True, log_to_driver=False)
@@ -189,8 +185,6 @@ def batch(
         fail(f"time-limit: {time_limit} must be positive")
     goal_data = None
     if goal is not None:
-        from pydantic import ValidationError
-
         try:
             goal_data = parse_goal(goal)
         except (ValidationError, ValueError) as e:

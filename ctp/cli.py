@@ -2,6 +2,10 @@
 
 Bad input (a malformed scene, a wrong combination string, an unparsable direction) prints one
 line naming the field and exits with code 2.
+
+The analysis is imported at the top; the planner (OMPL, about 1.5 s), MuJoCo (1 s) and the batch
+runner (Ray, about 4 s) and matplotlib are imported inside the commands that use them, so
+``ctp analyze`` and ``ctp --help`` do not wait for them.
 """
 
 from __future__ import annotations
@@ -13,11 +17,20 @@ from typing import Annotated, Any, NoReturn
 
 import numpy as np
 import typer
+from pydantic import ValidationError
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from analysis.combination import analyze_combination
+from analysis.contacts import build_system
+from analysis.dafc import SEMANTICS
+from analysis.enumerate import enumerate_combinations
 from analysis.exceptions import CTPError, SceneError
+from analysis.geometry import object_size
+from analysis.loader import load_scene, scene_from_dict
+from analysis.modes import combination_admissible, enumerate_modes
+from analysis.scene import scene_json_schema
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="Contact-state closure analysis and planning.")
 console = Console()
@@ -30,7 +43,6 @@ def _fail(message: str, code: int = 2) -> NoReturn:
 
 
 def _load(scene_path: Path) -> Any:
-    from analysis.scene import load_scene
 
     try:
         return load_scene(scene_path)
@@ -67,9 +79,6 @@ def analyze(
     prune_modes: Annotated[bool, typer.Option(help="prune with kinematic contact modes")] = True,
 ) -> None:
     """Closure analysis: every combination (table), or the full report of one."""
-    from analysis.combination import analyze_combination
-    from analysis.contacts import build_system
-    from analysis.dafc import SEMANTICS
 
     sc = _load(scene)
     system = build_system(sc)
@@ -93,7 +102,7 @@ def analyze(
                 json_out.write_text(json.dumps(data, indent=2))
                 console.print(f"wrote {json_out}")
             if plot:
-                from analysis.plot import plot_report
+                from ctp.plot import plot_report
 
                 plot_report(plot, sc, report)
                 console.print(f"wrote {plot}")
@@ -119,7 +128,7 @@ def analyze(
         json_out.write_text(json.dumps(data, indent=2))
         console.print(f"wrote {json_out}")
     if plot:
-        from analysis.plot import plot_report
+        from ctp.plot import plot_report
 
         first = next((s for s in summaries if s.feasible), None)
         rep = analyze_combination(system, first.combination) if first else None
@@ -128,17 +137,10 @@ def analyze(
 
 
 def _enumerate(system: Any, prune_modes: bool) -> list[Any]:
-    from analysis.enumerate import enumerate_combinations
-
     admissible = None
     if prune_modes:
-        try:
-            from analysis.modes import combination_admissible, enumerate_modes
-        except ImportError:  # pragma: no cover - modes module optional during development
-            admissible = None
-        else:
-            modes = enumerate_modes(system, refine=False)
-            admissible = lambda c: combination_admissible(modes, c)  # noqa: E731
+        modes = enumerate_modes(system, refine=False)
+        admissible = lambda c: combination_admissible(modes, c)  # noqa: E731
     with Progress(TextColumn("combinations"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=err_console, transient=True, disable=not sys.stderr.isatty()) as bar:
         task = bar.add_task("enumerate", total=None)
@@ -205,8 +207,6 @@ def modes(
     max_modes: Annotated[int, typer.Option(help="stop listing sticking/sliding modes after this many")] = 200_000,
 ) -> None:
     """Kinematic contact modes (contacting/separating and sticking/sliding) that some motion realises."""
-    from analysis.contacts import build_system
-    from analysis.modes import enumerate_modes
 
     sc = _load(scene)
     if tangent_planes < 2:
@@ -241,7 +241,6 @@ def _read_plan_file(path: Path) -> dict[str, Any] | None:
 
 def _plan_scene(plan_path: Path, data: dict[str, Any], scene_path: Path | None) -> Any:
     """The scene a plan file was made for: ``--scene``, else the file's ``"scene"`` entry."""
-    from analysis.scene import scene_from_dict
 
     if scene_path is not None:
         return _load(scene_path)
@@ -309,9 +308,8 @@ def simulate(
     """Replay joint torques in MuJoCo (quasi-static) and report the object's motion and contacts;
     or, given a plan file, replay the whole plan in one simulation and compare the final pose with
     the plan's (exit code 1 if the object was dropped)."""
-    from analysis.combination import analyze_combination
-    from analysis.contacts import build_system
-    from sim.torque_replay import format_report, simulate_torques
+    from sim.report import format_report
+    from sim.torque_replay import simulate_torques
 
     plan_data = _read_plan_file(scene)
     if plan_data is not None:
@@ -341,7 +339,6 @@ def simulate(
                           f"predicted direction {_fmt(predicted)}")
         else:
             _fail("torque: give --torque or --combination")
-        from analysis.geometry import object_size
 
         result = simulate_torques(sc, tau, duration=duration, combination=combination,
                                   stop_distance=stop_fraction * object_size(sc) if stop_fraction > 0 else None)
@@ -376,11 +373,11 @@ def plan(
     out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
     replay: Annotated[bool, typer.Option(help="replay the whole plan in MuJoCo (one continuous simulation)")] = False,
 ) -> None:
-    """Plan contact-state transitions to a goal closure (the planner of issue 3)."""
-    from pydantic import ValidationError
+    """Plan contact-state transitions from the scene's grasp to a goal: active or passive closure,
+    fingertip contacts only, a named combination or an object pose."""
 
     from planner import Goal
-    from planner import plan as make_plan  # lazy: analysis does not depend on planner
+    from planner import plan as make_plan
 
     sc = _load(scene)
     try:
@@ -435,7 +432,7 @@ def plan(
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True, "help_option_names": []})
 def batch(ctx: typer.Context) -> None:
     """Plan (--goal) or enumerate (--enumerate) every scene of a folder; resumable; processes or Ray."""
-    from ctp.batch import main as batch_main  # the service package owns it (api imports analysis)
+    from ctp.batch import main as batch_main
 
     batch_main(ctx.args)
 
@@ -443,7 +440,6 @@ def batch(ctx: typer.Context) -> None:
 @app.command()
 def schema(out: Annotated[Path | None, typer.Option(help="write to a file instead of stdout")] = None) -> None:
     """Print the JSON Schema of the scene format."""
-    from analysis.scene import scene_json_schema
 
     text = json.dumps(scene_json_schema(), indent=2)
     if out:

@@ -47,8 +47,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from analysis.contacts import build_system, tangent_basis  # noqa: E402
+from analysis.loader import load_scene, scene_from_dict  # noqa: E402
 from analysis.rotations import matrix_to_quat_wxyz, quat_wxyz_to_matrix  # noqa: E402
-from analysis.scene import load_scene, scene_from_dict  # noqa: E402
 from analysis.urdf import UrdfFinger, resolve_urdf_path  # noqa: E402
 
 Array = NDArray[np.float64]

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from typer.testing import CliRunner
 
-from analysis.scene import load_scene, scene_from_dict
+from analysis.loader import load_scene, scene_from_dict
 from ctp.cli import app
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
