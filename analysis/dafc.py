@@ -482,12 +482,14 @@ def _dedupe(U: Array) -> Array:
     return np.array(out).reshape(-1, U.shape[1] if U.ndim == 2 else 0)
 
 
-def _prefer_realisable(oracle: DAFCOracle, dirs: list[Array], **test_options: bool) -> DirectionTest | None:
-    """Test the coordinates ``dirs`` in order; the first member whose torque set (32) is
-    non-empty (:meth:`DAFCOracle.realisable`), else the first member, else None."""
+def _prefer_realisable(oracle: DAFCOracle, dirs: list[Array], screen: bool = True, quick: bool = False,
+                       witness: bool = True) -> DirectionTest | None:
+    """Test the coordinates ``dirs`` in order (options of :meth:`DAFCOracle.test`); the first
+    member whose torque set (32) is non-empty (:meth:`DAFCOracle.realisable`), else the first
+    member, else None."""
     first: DirectionTest | None = None
     for u in dirs:
-        t = oracle.test(oracle.ms.Lambda_r_t @ u, **test_options)
+        t = oracle.test(oracle.ms.Lambda_r_t @ u, screen=screen, quick=quick, witness=witness)
         if t.member:
             if oracle.realisable(t):
                 return t

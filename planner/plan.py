@@ -1,4 +1,4 @@
-"""Plans: the sequence of contact-state transitions from a scene's grasp to a goal (issue 3).
+"""Plans: the sequence of contact-state transitions from a scene's grasp to a goal.
 
 :func:`plan` is the entry point used by the command line (``ctp plan``) and the service. It
 builds the contact-state graph lazily (:mod:`planner.graph`), searches it
@@ -13,28 +13,93 @@ a ``reason`` naming the constraint that blocked the search; malformed input rais
 
 from __future__ import annotations
 
+import math
 import platform
 import time
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field, fields
 from typing import Any
 
 import numpy as np
+from pydantic import ValidationError
 
 from analysis._types import Array
 from analysis.exceptions import SceneError
+from analysis.geometry import object_size, shape_signed_distance
 from analysis.kinematics import HandKinematics
+from analysis.pose import Pose
 from analysis.scene import Scene
-from planner.goals import Goal
-from planner.graph import ContactStateGraph, PlannerOptions, Transition
+from planner.goals import Goal, goal_heuristic, goal_reached
+from planner.graph import ContactStateGraph
+from planner.options import PlannerOptions
 from planner.search import best_first_search
-from planner.state import GraspState, all_f, state_from_scene
+from planner.state import GraspContact, GraspState, all_f, state_from_scene
+from planner.transition import Transition, figures_from_json
 
 Progress = Callable[[float, str], None]
+
+#: The kinds of plan steps: regrasps (eq. 33) and object motions (eq. 30-32).
+KINDS = ("release", "contact", "object_motion")
 
 
 def _list(a: Array | None) -> Any:
     return None if a is None else np.round(np.asarray(a, dtype=float), 10).tolist()
+
+
+def _array(value: Any, loc: tuple[str | int, ...], shape: tuple[int | None, ...]) -> Array:
+    """``value`` as a finite float array of ``shape`` (``None``: any length >= 1), else SceneError."""
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise SceneError(loc, "must be an array of numbers") from None
+    want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
+    if a.ndim != len(shape) or any(s is not None and a.shape[i] != s for i, s in enumerate(shape)):
+        raise SceneError(loc, f"must have shape {want}, got {a.shape}")
+    if a.size == 0 or not np.all(np.isfinite(a)):
+        raise SceneError(loc, f"must be a non-empty {want} array of finite numbers")
+    return a
+
+
+def _inward_normal(scene: Scene, p_local: Array) -> Array:
+    """The object's unit inward surface normal ``(d,)`` at ``p_local`` ``(d,)`` (object frame):
+    central differences of its signed distance, step ``1e-6`` object sizes; NaN where the shape
+    has no signed distance (meshes) or no gradient."""
+    d = scene.dim
+    step = 1e-6 * object_size(scene)
+    grad = np.zeros(d)
+    for k in range(d):
+        e = np.zeros(d)
+        e[k] = step
+        hi = shape_signed_distance(scene.object.shape, p_local + e, d)
+        lo = shape_signed_distance(scene.object.shape, p_local - e, d)
+        if hi is None or lo is None:
+            return np.full(d, np.nan)
+        grad[k] = (hi - lo) / (2 * step)
+    if not np.linalg.norm(grad) > 0:
+        return np.full(d, np.nan)
+    return np.asarray(-grad / np.linalg.norm(grad))
+
+
+def _state_from_file(scene: Scene, hand: HandKinematics, bodies: tuple[str, ...], points: Array | None,
+                     q: Array, pose_vector: Array) -> GraspState:
+    """The grasp state after a step as the plan file gives it: hand at ``q`` ``(M,)``, object at
+    ``pose_vector`` ``(D,)``, ``bodies`` touching at the world ``points`` ``(L, d)`` (NaN when the
+    file has none). The file stores neither normals nor friction: each contact gets the object's
+    inward surface normal there and the ``mu`` of the scene's contact on the same body, else the
+    smallest scene ``mu``."""
+    d = scene.dim
+    pose = Pose.from_vector(pose_vector, d)
+    mus = {c.body: float(c.mu) for c in scene.contacts}
+    mu_default = min(mus.values()) if mus else 0.0
+    pts = np.full((len(bodies), d), np.nan) if points is None else points  # (L, d)
+    contacts = []
+    for body, p in zip(bodies, pts, strict=True):
+        ref = hand.resolve_body(body)
+        assert ref is not None  # checked by Plan.from_json
+        local = pose.to_local(p)  # (d,) object frame
+        contacts.append(GraspContact(body, hand.to_local(ref, p, q), local, _inward_normal(scene, local),
+                                     mus.get(body, mu_default)))
+    return GraspState(tuple(contacts), q, pose.position, pose.rotation, d)
 
 
 @dataclass(frozen=True)
@@ -61,10 +126,65 @@ class PlanStep:
                 "chosen": _list(t.tau),
                 "set": t.torque_set,
             },
-            "figures": t.figures,
+            "figures": t.figures.to_json(),
             "cost": t.cost,
             "contact_points_after": [_list(self.after.world_point(i)) for i in range(self.after.L)],
         }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any], index: int, before: GraspState, scene: Scene,
+                  hand: HandKinematics) -> PlanStep:
+        """Step ``index`` of a plan file (the inverse of :meth:`to_json`), starting from the state
+        ``before``; the state after it is rebuilt from the file (see :meth:`Plan.from_json`). Raises
+        :class:`SceneError` at ``("steps", index, field)``."""
+        M, D = hand.M, scene.D
+        loc: tuple[str | int, ...] = ("steps", index)
+        if not isinstance(data, Mapping):
+            raise SceneError(loc, "must be an object")
+        kind = data.get("kind")
+        if kind not in KINDS:
+            raise SceneError((*loc, "kind"), f"must be one of {', '.join(KINDS)} (got {kind!r})")
+        bodies: dict[str, tuple[str, ...]] = {}
+        for key in ("contacts_before", "contacts_after"):
+            names = data.get(key)
+            if not isinstance(names, list) or not all(isinstance(b, str) for b in names):
+                raise SceneError((*loc, key), "must be a list of body names")
+            for j, b in enumerate(names):
+                if hand.resolve_body(b) is None:
+                    raise SceneError((*loc, key, j), f"unknown body '{b}' (known: {', '.join(hand.body_names())})")
+            bodies[key] = tuple(names)
+        comb = data.get("combination")
+        if not isinstance(comb, str) or len(comb) != len(bodies["contacts_before"]) + (kind == "contact"):
+            raise SceneError((*loc, "combination"), "must be a string with one letter per contact")
+        q_path = _array(data.get("joint_path"), (*loc, "joint_path"), (None, M))  # (n, M)
+        obj = _array(data.get("object_path"), (*loc, "object_path"), (None, D))  # (k, D)
+        torques = data.get("torques")
+        if not isinstance(torques, Mapping):
+            raise SceneError((*loc, "torques"), "must be an object with 'stationary' and 'chosen'")
+        tau_st = None if torques.get("stationary") is None else _array(
+            torques["stationary"], (*loc, "torques", "stationary"), (M,))
+        tau = None if torques.get("chosen") is None else _array(torques["chosen"], (*loc, "torques", "chosen"), (M,))
+        if kind == "object_motion" and tau is None:
+            raise SceneError((*loc, "torques", "chosen"), "an object motion needs its chosen torque (32)")
+        if kind == "release" and tau_st is None:
+            raise SceneError((*loc, "torques", "stationary"), "a release needs the stationary torque (18)")
+        pts = data.get("contact_points_after")
+        points = None if pts is None else _array(pts, (*loc, "contact_points_after"),
+                                                 (len(bodies["contacts_after"]), scene.dim))  # (L_after, d)
+        try:
+            figures = figures_from_json(kind, data["figures"])
+        except (KeyError, TypeError, ValueError):
+            raise SceneError((*loc, "figures"), f"must be the figures of a {kind} step (as Plan.to_json writes them)"
+                             ) from None
+        cost = data.get("cost")
+        transition = Transition(
+            kind=kind, combination=comb, contacts_before=bodies["contacts_before"],
+            contacts_after=bodies["contacts_after"], q_path=q_path, object_path=obj, tau_stationary=tau_st,
+            tau=tau, torque_set=torques.get("set"), figures=figures,
+            cost=float(cost) if isinstance(cost, int | float) else math.nan,
+        )
+        after = _state_from_file(scene, hand, bodies["contacts_after"], points, q_path[-1], obj[-1])
+        return cls(index, transition, before, after)
 
 
 @dataclass(frozen=True)
@@ -84,6 +204,14 @@ class PlanStats:
 
     def to_json(self) -> dict[str, Any]:
         return dict(self.__dict__)
+
+    @classmethod
+    def from_json(cls, data: Any) -> PlanStats:
+        """The inverse of :meth:`to_json`; raises :class:`SceneError` at ``("stats",)``."""
+        names = [f.name for f in fields(cls)]
+        if not isinstance(data, Mapping) or set(data) != set(names):
+            raise SceneError(("stats",), f"must be an object with the fields {', '.join(names)}")
+        return cls(**{k: data[k] for k in names})
 
 
 @dataclass(frozen=True)
@@ -125,6 +253,65 @@ class Plan:
             "stats": self.stats.to_json(),
             "rejections": self.rejections,
         }
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any], scene: Scene, hand: HandKinematics | None = None) -> Plan:
+        """The plan of its JSON form (:meth:`to_json`, a ``ctp plan --out`` file), for ``scene``, the
+        scene it was planned from: ``Plan.from_json(p.to_json(), scene).to_json() == p.to_json()``.
+
+        Checks the file against the scene (body names, array shapes ``(n, M)``, ``(k, D)``,
+        ``(M,)``, step kinds, one combination letter per contact, the torques each kind needs)
+        and raises :class:`SceneError` naming the first bad field. The grasp states are rebuilt:
+        the one before the first step is the scene's, the one after each step has the hand at
+        ``joint_path[-1]``, the object at ``object_path[-1]`` and the bodies ``contacts_after``
+        at ``contact_points_after``, with the object's inward surface normal at each point and the
+        scene's ``mu`` of that body (else the smallest; the file stores neither). A plan that was
+        not found reads back with ``found = False`` and may have no steps.
+        """
+        hand = hand or HandKinematics.from_scene(scene)
+        D = scene.D
+        if not isinstance(data, Mapping) or "steps" not in data:
+            raise SceneError(("steps",), "missing: this is not a plan (Plan.to_json / ctp plan --out)")
+        found = data.get("found") is not False
+        raw = data["steps"]
+        if not isinstance(raw, list) or (found and not raw):
+            raise SceneError(("steps",), "must be a non-empty list of steps")
+        poses = {}
+        for key in ("start_pose", "final_pose"):
+            if key not in data:
+                raise SceneError((key,), "missing")
+            poses[key] = _array(data[key], (key,), (D,))  # (D,)
+        steps: list[PlanStep] = []
+        before = state_from_scene(scene, hand)
+        for i, st in enumerate(raw):
+            step = PlanStep.from_json(st, i, before, scene, hand)
+            steps.append(step)
+            before = step.after
+        given = data.get("final_holding_torque")
+        final_tau = None if given is None else _array(given, ("final_holding_torque",), (hand.M,))
+        if "goal" not in data:
+            raise SceneError(("goal",), "missing")
+        try:
+            goal = Goal.model_validate(data["goal"])
+        except ValidationError as e:
+            raise SceneError(("goal",), str(e.errors()[0]["msg"])) from None
+        stats = PlanStats.from_json(data.get("stats"))
+        last = steps[-1].transition.contacts_after if steps else before.bodies()
+        cost = data.get("cost")
+        return cls(
+            found=found,
+            reason=str(data.get("reason", "")),
+            goal=goal,
+            steps=tuple(steps),
+            start_pose=poses["start_pose"],
+            final_pose=poses["final_pose"],
+            final_contacts=tuple(data.get("final_contacts", last)),
+            final_combination=str(data.get("final_combination", "F" * len(last))),
+            cost=float(cost) if isinstance(cost, int | float) else math.inf,
+            stats=stats,
+            rejections=dict(data.get("rejections") or {}),
+            final_tau=final_tau,
+        )
 
 
 def check_goal(scene: Scene, goal: Goal) -> None:
@@ -174,17 +361,23 @@ def plan(
             frac = max(frac, (time.perf_counter() - t0) / time_limit)
         progress(min(0.99, frac), f"expanded {n}: contacts {graph.states[node].describe()}")
 
+    def is_goal(node: Any) -> bool:
+        return goal_reached(goal, graph.states[node], hand, graph.analysis, graph.options.dafc_samples)
+
+    def heuristic(node: Any) -> float:
+        return goal_heuristic(goal, graph.states[node], hand, graph.options.heuristic_weight)
+
     sa0 = graph.analysis(start)
     if sa0.stationary(all_f(start)) is None:
         result = None
         reason = "the start grasp has no stationary grasp (18): the contacts cannot hold the object"
     else:
-        result = best_first_search(key, graph.successors, graph.is_goal, rejections=graph.rejections,
+        result = best_first_search(key, graph.successors, is_goal, rejections=graph.rejections,
                                    max_expansions=max_expansions, time_limit=time_limit, progress=report,
-                                   heuristic=graph.heuristic)
+                                   heuristic=heuristic)
         reason = "goal reached" if result.found else result.blocking_reason()
     total = time.perf_counter() - t0
-    tm = graph.timing
+    tm = graph.timings
     busy = tm["analysis"] + tm["ompl"] + tm["ik"] + tm["motion"]
     stats = PlanStats(
         nodes_expanded=0 if result is None else result.expanded,

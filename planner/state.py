@@ -13,6 +13,7 @@ grasp system and the closure analysis of its combinations.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -23,8 +24,9 @@ from analysis.contacts import GraspSystem, build_system
 from analysis.exceptions import NoStationaryGrasp, SceneError
 from analysis.geometry import object_origin, object_rotation
 from analysis.kinematics import HandKinematics
-from analysis.rotations import matrix_to_quat_wxyz, matrix_to_rotvec
-from analysis.scene import Scene, scene_from_dict
+from analysis.loader import scene_from_dict
+from analysis.pose import Pose
+from analysis.scene import Scene
 from analysis.stationary import StationaryGrasp, stationary_grasp
 
 #: Rounding (scene units / radians) of the node key: states closer than this are one node.
@@ -55,7 +57,8 @@ class GraspState:
     """A node of the contact-state graph.
 
     ``q`` ``(M,)`` is the whole hand's configuration (scene finger order), ``position`` ``(d,)``
-    and ``rotation`` ``(3, 3)`` the object pose (``p_o`` and its frame).
+    and ``rotation`` ``(3, 3)`` the object pose (``p_o`` and its frame), also as one
+    :class:`~analysis.pose.Pose` (:attr:`pose`).
     """
 
     contacts: tuple[GraspContact, ...]
@@ -75,11 +78,14 @@ class GraspState:
     def L(self) -> int:
         return len(self.contacts)
 
+    @cached_property
+    def pose(self) -> Pose:
+        """The object pose (``position``, ``rotation``) as one :class:`~analysis.pose.Pose`."""
+        return Pose(self.position, self.rotation, self.dim)
+
     def pose_vector(self) -> Array:
         """2-D ``(x, y, theta)``; 3-D ``(x, y, z, rx, ry, rz)`` (rotation vector)."""
-        if self.dim == 2:
-            return np.array([*self.position, np.arctan2(self.rotation[1, 0], self.rotation[0, 0])])
-        return np.concatenate([self.position, matrix_to_rotvec(self.rotation)])
+        return self.pose.vector()
 
     def world_point(self, i: int) -> Array:
         """World position ``(d,)`` of contact ``i`` (object side)."""
@@ -97,6 +103,10 @@ class GraspState:
     def with_contacts(self, contacts: tuple[GraspContact, ...], q: Array | None = None) -> GraspState:
         return GraspState(contacts, self.q if q is None else np.asarray(q, float), self.position,
                           self.rotation, self.dim)
+
+    def with_pose(self, pose: Pose, q: Array | None = None) -> GraspState:
+        """The same contacts with the object at ``pose`` (and the hand at ``q`` if given)."""
+        return GraspState(self.contacts, self.q if q is None else q, pose.position, pose.rotation, self.dim)
 
     def describe(self) -> str:
         return "[" + ", ".join(c.body for c in self.contacts) + "]"
@@ -129,12 +139,7 @@ def state_from_scene(scene: Scene, hand: HandKinematics | None = None) -> GraspS
 def state_scene_dict(base: Scene, state: GraspState, hand: HandKinematics) -> dict[str, Any]:
     """The scene dictionary of ``state``: ``base`` with the state's pose, ``q`` and contacts."""
     data = base.model_dump(mode="json", exclude_none=True)
-    pose: dict[str, Any] = {"position": [float(x) for x in state.position]}
-    if state.dim == 2:
-        pose["angle"] = float(state.pose_vector()[2])
-    else:
-        pose["quat_wxyz"] = [float(x) for x in matrix_to_quat_wxyz(state.rotation)]
-    data["object"]["pose"] = pose
+    data["object"]["pose"] = state.pose.fields()
     for i, f in enumerate(data["fingers"]):
         f["q"] = [float(x) for x in state.q[hand.finger_slice(i)]]
     data["contacts"] = [

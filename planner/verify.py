@@ -26,7 +26,8 @@ from analysis.exceptions import CTPError
 from analysis.kinematics import BodyRef, HandKinematics
 from analysis.scene import Scene
 from analysis.torques import torque_set
-from planner.ompl_paths import CollisionModel, path_clearance_certified
+from planner.collision import CollisionModel, path_clearance_certified
+from planner.manifold import ContactManifold, pose_displacement
 from planner.plan import Plan, PlanStep
 from planner.state import StateAnalysis, all_f
 
@@ -95,10 +96,8 @@ def _manifold_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: 
     """Every waypoint of an object motion lies on the contact manifold of its kept contacts (body
     point = object point) and of its sliding ones (touching), eq. (7) to every order, within 1e-6.
     The sliding contacts are the step's ``sliding_contacts``, as the planner followed them."""
-    from planner.ompl_paths import ContactManifold, pose_displacement
-
     t = step.transition
-    sliding = [int(i) for i in t.figures.get("sliding_contacts", [])]
+    sliding = [int(i) for i in getattr(t.figures, "sliding_contacts", ())]
     sticking = [i for i, ch in enumerate(t.combination) if ch != "D" and i not in sliding]
     try:
         man = ContactManifold(hand, step.before, sticking, sliding, scene)

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from analysis.scene import Scene, load_scene
+from analysis.loader import load_scene
+from analysis.scene import Scene
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

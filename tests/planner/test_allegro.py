@@ -13,14 +13,15 @@ import pytest
 from closure_helpers import EXAMPLES
 
 from analysis.kinematics import HandKinematics
-from analysis.scene import load_scene
+from analysis.loader import load_scene
 from planner import plan
+from planner.collision import CollisionModel
 from planner.goals import Goal
 from planner.graph import ContactStateGraph
-from planner.ompl_paths import CollisionModel, joint_limits, numeric_ik
+from planner.ik import joint_limits, numeric_ik
 from planner.plan import PlanStep
 from planner.state import state_from_scene
-from planner.verify import verify_step
+from planner.verify import verify_plan, verify_step
 
 
 @pytest.fixture(scope="module")
@@ -94,8 +95,6 @@ def test_allegro_regrasp_steps_pass_the_analysis(allegro) -> None:  # type: igno
 
 @pytest.mark.slow
 def test_allegro_plan_to_a_fingertip_grasp_passes_the_analysis(allegro) -> None:  # type: ignore[no-untyped-def]
-    from planner.verify import verify_plan
-
     scene, _, _ = allegro
     p = plan(scene, Goal(type="fingertips"), time_limit=120.0)
     assert p.found, p.reason

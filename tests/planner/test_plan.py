@@ -6,12 +6,15 @@ import json
 
 import numpy as np
 import pytest
+from test_transfer import _dense_check
 
 from analysis.exceptions import SceneError
-from analysis.kinematics import HandKinematics
-from analysis.scene import Scene, scene_from_dict
+from analysis.kinematics import BodyRef, HandKinematics
+from analysis.loader import scene_from_dict
+from analysis.scene import Scene
 from planner import Goal, plan
-from planner.graph import closure_is_active
+from planner.collision import CollisionModel
+from planner.goals import closure_is_active
 from planner.state import StateAnalysis, all_f
 from planner.verify import verify_plan
 
@@ -83,11 +86,6 @@ def test_progress_is_reported(planar_scene: Scene) -> None:
 
 
 def test_finger_paths_of_the_plan_are_collision_free_every_millimetre(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
-    from test_ompl_paths import _dense_check
-
-    from analysis.kinematics import BodyRef
-    from planner.ompl_paths import CollisionModel
-
     hand = HandKinematics.from_scene(planar_scene)
     model = CollisionModel.of(planar_scene, hand)
     checked = 0
@@ -95,7 +93,7 @@ def test_finger_paths_of_the_plan_are_collision_free_every_millimetre(planar_sce
         t = step.transition
         if t.kind != "contact":
             continue
-        f = next(i for i, ch in enumerate(hand.fingers) if ch.name == t.figures["finger"])
+        f = next(i for i, ch in enumerate(hand.fingers) if ch.name == t.figures.finger)
         chain = hand.fingers[f]
         tip = BodyRef(f"{chain.name}/{chain.n_joints - 1}", f, chain.n_joints - 1)
         path = t.q_path[:, hand.finger_slice(f)]
@@ -115,3 +113,116 @@ def test_pose_goal_moves_the_object_there(planar_scene: Scene) -> None:
     np.testing.assert_allclose(p.final_pose, [0.0, 0.55, 0.0], atol=0.01)
     assert [s.transition.kind for s in p.steps].count("object_motion") >= 1
     assert verify_plan(planar_scene, p) == []
+
+
+# --------------------------------------------------------------------------------------------
+# Plan.from_json: the one reader of the plan file, the inverse of Plan.to_json
+# (imports inside the tests: this block is appended to the file, below its import section)
+
+
+def _json(data: dict) -> dict:  # type: ignore[type-arg]
+    out: dict = json.loads(json.dumps(data))  # type: ignore[type-arg]
+    return out
+
+
+def test_plan_from_json_inverts_to_json(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
+    from planner.plan import Plan
+
+    data = _json(planar_plan.to_json())
+    back = Plan.from_json(data, planar_scene)
+    assert _json(back.to_json()) == data
+    assert back.found and len(back.steps) == len(planar_plan.steps)
+    np.testing.assert_allclose(back.displacement, planar_plan.displacement, atol=1e-9)
+    np.testing.assert_allclose(back.final_tau, planar_plan.final_tau, atol=1e-9)
+    # the rebuilt grasp states chain and are the planner's (contacts, object-frame points, normals)
+    for a, b in zip(back.steps, back.steps[1:], strict=False):
+        assert a.after.key() == b.before.key()
+    for mine, theirs in zip(back.steps, planar_plan.steps, strict=True):
+        assert mine.transition.kind == theirs.transition.kind
+        assert mine.before.key() == theirs.before.key() and mine.after.key() == theirs.after.key()
+        np.testing.assert_allclose(mine.after.q, theirs.after.q, atol=1e-9)
+        for i in range(mine.after.L):
+            np.testing.assert_allclose(mine.after.world_point(i), theirs.after.world_point(i), atol=1e-9)
+            np.testing.assert_allclose(mine.after.world_normal(i), theirs.after.world_normal(i), atol=1e-6)
+    # and again: reading is idempotent
+    assert _json(Plan.from_json(back.to_json(), planar_scene).to_json()) == data
+
+
+def test_plan_from_json_reads_a_plan_that_was_not_found(planar_scene: Scene) -> None:
+    from planner.plan import Plan
+
+    p = plan(planar_scene, Goal(type="combination", combination="FFFFFFFFFF"), max_expansions=2)
+    data = _json(p.to_json())
+    back = Plan.from_json(data, planar_scene)
+    assert not back.found and back.steps == () and back.reason == p.reason
+    assert _json(back.to_json()) == data
+
+
+@pytest.mark.parametrize(
+    ("case", "loc"),
+    [
+        ("no_steps", ("steps",)),
+        ("empty_steps", ("steps",)),
+        ("no_start_pose", ("start_pose",)),
+        ("short_final_pose", ("final_pose",)),
+        ("step_not_object", ("steps", 2)),
+        ("bad_kind", ("steps", 0, "kind")),
+        ("unknown_body", ("steps", 0, "contacts_after", 0)),
+        ("bad_combination", ("steps", 0, "combination")),
+        ("short_joint_path", ("steps", 1, "joint_path")),
+        ("nan_object_path", ("steps", 0, "object_path")),
+        ("no_torques", ("steps", 0, "torques")),
+        ("release_without_stationary", ("steps", 0, "torques", "stationary")),
+        ("bad_chosen", ("steps", 4, "torques", "chosen")),
+        ("bad_points", ("steps", 0, "contact_points_after")),
+        ("bad_figures", ("steps", 0, "figures")),
+        ("bad_final_torque", ("final_holding_torque",)),
+        ("bad_goal", ("goal",)),
+        ("no_stats", ("stats",)),
+    ],
+)
+def test_plan_from_json_names_the_bad_field(planar_scene: Scene, planar_plan, case: str, loc: tuple) -> None:  # type: ignore[no-untyped-def,type-arg]
+    from planner.plan import Plan
+
+    data = _json(planar_plan.to_json())
+    steps = data["steps"]
+    assert steps[0]["kind"] == "release" and steps[4]["kind"] == "object_motion"
+    if case == "no_steps":
+        del data["steps"]
+    elif case == "empty_steps":
+        data["steps"] = []
+    elif case == "no_start_pose":
+        del data["start_pose"]
+    elif case == "short_final_pose":
+        data["final_pose"] = [0.0, 1.0]
+    elif case == "step_not_object":
+        steps[2] = 3
+    elif case == "bad_kind":
+        steps[0]["kind"] = "teleport"
+    elif case == "unknown_body":
+        steps[0]["contacts_after"][0] = "thumb/7"
+    elif case == "bad_combination":
+        steps[0]["combination"] += "F"
+    elif case == "short_joint_path":
+        steps[1]["joint_path"] = [row[:3] for row in steps[1]["joint_path"]]
+    elif case == "nan_object_path":
+        steps[0]["object_path"][0][0] = float("nan")
+    elif case == "no_torques":
+        del steps[0]["torques"]
+    elif case == "release_without_stationary":
+        steps[0]["torques"]["stationary"] = None
+    elif case == "bad_chosen":
+        steps[4]["torques"]["chosen"] = [1.0, 2.0]
+    elif case == "bad_points":
+        steps[0]["contact_points_after"] = steps[0]["contact_points_after"][:-1]
+    elif case == "bad_figures":
+        del steps[0]["figures"]["finger"]
+    elif case == "bad_final_torque":
+        data["final_holding_torque"] = [0.0, float("nan")]
+    elif case == "bad_goal":
+        data["goal"] = {"type": "teleport"}
+    elif case == "no_stats":
+        del data["stats"]
+    with pytest.raises(SceneError) as e:
+        Plan.from_json(data, planar_scene)
+    assert e.value.loc == loc, e.value

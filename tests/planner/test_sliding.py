@@ -10,10 +10,12 @@ from analysis.exceptions import SceneError
 from analysis.kinematics import HandKinematics
 from analysis.scene import Box, Scene
 from planner import Goal, plan
-from planner.ompl_paths import ContactManifold
-from planner.state import state_from_scene
+from planner.manifold import ContactManifold
+from planner.state import state_from_scene, state_scene
 from planner.verify import verify_plan
+from sim.plan_replay import simulate_plan
 from sim.step_replay import replay_plan
+from sim.torque_replay import simulate_torques
 
 
 def test_sliding_rows_jacobian_matches_finite_differences(planar_scene: Scene) -> None:
@@ -82,9 +84,6 @@ def test_sliding_steps_replay_in_mujoco(planar_scene: Scene, slide_plan) -> None
     assert not r.dropped
     assert all(s.ok for s in r.steps), [s.note for s in r.steps if not s.ok]
     assert r.relative_error <= 0.05
-    from planner.state import state_scene
-    from sim.torque_replay import simulate_torques
-
     step = next(s for s in slide_plan.steps if "S" in s.transition.combination)
     t = step.transition
     hand = HandKinematics.from_scene(planar_scene)
@@ -99,8 +98,6 @@ def test_sliding_steps_replay_in_mujoco(planar_scene: Scene, slide_plan) -> None
 def test_sliding_plan_replays_continuously(planar_scene: Scene, slide_plan) -> None:  # type: ignore[no-untyped-def]
     """The whole pose plan (regrasps, then six sliding motions) in one MuJoCo run ends within 5 %
     of the planned displacement and never drops the disk."""
-    from sim.plan_replay import simulate_plan
-
     r = simulate_plan(planar_scene, slide_plan)
     assert not r.dropped, r.drop_reason
     assert r.relative_error <= 0.05

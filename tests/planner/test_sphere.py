@@ -9,7 +9,7 @@ import pytest
 from closure_helpers import EXAMPLES
 
 from analysis.geometry import object_size
-from analysis.scene import load_scene
+from analysis.loader import load_scene
 from planner import Goal, plan
 from planner.verify import verify_plan
 from sim.plan_replay import simulate_plan
@@ -35,4 +35,4 @@ def test_sphere_plan_to_active_closure_replays() -> None:
     assert float(np.linalg.norm(c.simulated_final_pose - p.final_pose)) <= 0.05 * float(np.linalg.norm(p.displacement))
     assert c.max_regrasp_deviation <= 2e-3 * object_size(scene)  # still while fingers regrasp
     assert 0.0 <= c.tracking_error <= 1e-4
-    assert [s.driven_finger for s in c.steps] == [st.transition.figures.get("finger") for st in p.steps]
+    assert [s.driven_finger for s in c.steps] == [getattr(st.transition.figures, "finger", None) for st in p.steps]

@@ -8,7 +8,7 @@ import pytest
 from analysis.exceptions import SceneError
 from analysis.kinematics import HandKinematics
 from analysis.scene import Scene
-from planner.ompl_paths import moved
+from planner.object_motion import moved
 from planner.state import AnalysisCache, StateAnalysis, all_f, state_from_scene, state_scene
 
 

@@ -1,0 +1,462 @@
+"""Capsule collision model of the hand and its Lipschitz clearance certificate.
+
+* **Capsules.** Every finger link is a capsule around its
+  :meth:`~analysis.kinematics.HandKinematics.body_segment` of radius
+  ``max(link radius, min_radius)`` (``min_radius``: 1 % of the object size by default, as scene
+  links may have radius 0). A configuration of a moving finger is valid when none of its capsules
+  penetrates the object, a fixed body (palm, table: link 0 is trimmed near its base joint, which
+  is mounted on the palm) or a link of another finger, and its non-adjacent links keep apart.
+  Distances to disks and spheres are exact; to boxes and polygons they are evaluated at points
+  along the link at most ``min_radius`` apart (so the error is below ``min_radius / 2``, and
+  the capsule radius is inflated by that amount; for boxes the signed distance is convex along a
+  segment, so 17 coarse samples bracket its minimum and only that bracket is sampled finely). A
+  link starting at its finger's base joint is not checked against fixed bodies over its first
+  ``BASE_TRIM`` (15 %) of length (the joint is mounted on the palm), and a link that already
+  overlaps a fixed body in the scene as given is taken to be mounted on it and not checked
+  against fixed bodies. :meth:`CollisionModel.clearance_terms` evaluates every (link, obstacle)
+  pair of a finger at once with numpy (segment-segment, segment-sphere and segment-box distances
+  vectorised over the pairs).
+* **Overlaps at the start of a motion.** A grasp given by the scene may have capsules that
+  overlap slightly (the Allegro example: the middle and ring links 0.3 mm into the object with
+  the inflated radius, two non-adjacent thumb links 3 mm into each other, because the link
+  radius is a coarse stand-in for the real geometry). Every motion (retreat, transfer, object
+  motion, and the certificate of :func:`path_clearance_certified`) takes the overlaps present at
+  its first configuration as an allowance (:meth:`CollisionModel.start_allowance`, per pair):
+  such a pair may keep its overlap or reduce it but never deepen it; every other pair must stay
+  collision-free as before. Without overlaps at the start the check is unchanged.
+* **Certificate.** :func:`path_clearance_certified` checks a joint-space polyline, every
+  configuration and not only samples: the clearance at a checked configuration bounds how far the
+  joints may move (``|dx| <= K |dq|``, :meth:`CollisionModel.lipschitz`) before a capsule can
+  touch, never stepping less than :data:`DENSE_STEP` where the clearance is tiny.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from analysis._types import Array
+from analysis.geometry import box_signed_distance, object_size, shape_signed_distance
+from analysis.kinematics import BodyRef, HandKinematics, SerialChain, segment_distance
+from analysis.rotations import skew
+from analysis.scene import Box, Disk, Scene, Segment, Sphere
+
+#: Joint-space step (rad) of the dense collision check: 1 mm of joint motion.
+DENSE_STEP = 1e-3
+#: Fraction of a link starting at the finger's base joint that is not checked against fixed bodies
+#: (the joint housing is mounted on the palm).
+BASE_TRIM = 0.15
+_EYE3 = np.eye(3)
+
+
+# --------------------------------------------------------------------------------------------
+# Distances
+
+
+def segment_segment_distance(a0: Array, a1: Array, b0: Array, b1: Array) -> float:
+    """Distance between the segments ``[a0, a1]`` and ``[b0, b1]`` (any dimension)."""
+    d1, d2, r = a1 - a0, b1 - b0, a0 - b0
+    a, e, f = float(d1 @ d1), float(d2 @ d2), float(d2 @ r)
+    if a <= 1e-15 and e <= 1e-15:
+        return float(np.linalg.norm(r))
+    if a <= 1e-15:
+        s, t = 0.0, float(np.clip(f / e, 0.0, 1.0))
+    else:
+        c = float(d1 @ r)
+        if e <= 1e-15:
+            t, s = 0.0, float(np.clip(-c / a, 0.0, 1.0))
+        else:
+            b = float(d1 @ d2)
+            den = a * e - b * b
+            s = float(np.clip((b * f - c * e) / den, 0.0, 1.0)) if den > 1e-15 else 0.0
+            t = (b * s + f) / e
+            if t < 0.0:
+                t, s = 0.0, float(np.clip(-c / a, 0.0, 1.0))
+            elif t > 1.0:
+                t, s = 1.0, float(np.clip((b - c) / a, 0.0, 1.0))
+    return float(np.linalg.norm((a0 + s * d1) - (b0 + t * d2)))
+
+def _shape_segment_distance(shape: object, a: Array, b: Array, dim: int, step: float) -> float:
+    """Signed distance from the segment ``[a, b]`` (shape frame) to a shape."""
+    if isinstance(shape, Disk | Sphere):
+        return segment_distance(np.zeros(dim), a[:dim], b[:dim]) - shape.radius
+    if isinstance(shape, Segment):
+        p0, p1 = (np.asarray(p, float) for p in shape.points)
+        return segment_segment_distance(a[:dim], b[:dim], p0, p1)
+    n = max(2, int(np.ceil(float(np.linalg.norm(b - a)) / step)) + 1)
+    if isinstance(shape, Box):  # vectorised box distance at the samples
+        c = np.asarray(shape.position if shape.position is not None else np.zeros(dim), dtype=float)
+        h = np.asarray(shape.size, dtype=float) / 2.0
+        P = a[:dim] + np.linspace(0.0, 1.0, n)[:, None] * (b[:dim] - a[:dim])  # (n, dim)
+        return float(box_signed_distance(P, c, h).min())
+    best = np.inf
+    for t in np.linspace(0.0, 1.0, n):
+        sd = shape_signed_distance(shape, a + t * (b - a), dim)
+        if sd is not None:
+            best = min(best, sd)
+    return float(best)
+
+
+def segment_segment_distances(A0: Array, A1: Array, B0: Array, B1: Array) -> Array:
+    """Distances ``(N,)`` between the segments ``[A0[i], A1[i]]`` and ``[B0[i], B1[i]]``
+    (arrays ``(N, dim)``): :func:`segment_segment_distance` vectorised over the pairs."""
+    d1, d2, r = A1 - A0, B1 - B0, A0 - B0
+    a = (d1 * d1).sum(axis=1)
+    e = (d2 * d2).sum(axis=1)
+    f = (d2 * r).sum(axis=1)
+    c = (d1 * r).sum(axis=1)
+    b = (d1 * d2).sum(axis=1)
+    a_s = np.where(a > 1e-15, a, 1.0)  # a point A: c = b = 0, the formulas below give s = 0
+    e_ok = e > 1e-15
+    e_s = np.where(e_ok, e, 1.0)
+    den = a * e - b * b
+    big = den > 1e-15
+    s = np.where(big, np.minimum(np.maximum((b * f - c * e) / np.where(big, den, 1.0), 0.0), 1.0), 0.0)
+    t = (b * s + f) / e_s
+    s = np.where(t < 0.0, np.minimum(np.maximum(-c / a_s, 0.0), 1.0),
+                 np.where(t > 1.0, np.minimum(np.maximum((b - c) / a_s, 0.0), 1.0), s))
+    t = np.minimum(np.maximum(t, 0.0), 1.0)
+    s = np.where(e_ok, s, np.minimum(np.maximum(-c / a_s, 0.0), 1.0))  # a point B
+    t = np.where(e_ok, t, 0.0)
+    diff = (A0 + s[:, None] * d1) - (B0 + t[:, None] * d2)
+    return np.sqrt((diff * diff).sum(axis=1))
+
+
+def _shape_segments_distance(shape: object, A: Array, B: Array, dim: int, step: float) -> Array:
+    """Signed distances ``(N,)`` from the segments ``[A[i], B[i]]`` (shape frame, ``(N, dim)``)
+    to a shape: :func:`_shape_segment_distance` vectorised over the segments (boxes: sampled at
+    most ``step`` apart along every segment)."""
+    if isinstance(shape, Disk | Sphere):
+        ab = B - A
+        L2 = np.einsum("ij,ij->i", ab, ab)
+        t = np.clip(-np.einsum("ij,ij->i", A, ab) / np.where(L2 > 0.0, L2, 1.0), 0.0, 1.0)
+        t = np.where(L2 > 0.0, t, 0.0)
+        return np.linalg.norm(A + t[:, None] * ab, axis=1) - shape.radius
+    if isinstance(shape, Segment):
+        p0, p1 = (np.broadcast_to(np.asarray(p, float)[:dim], A.shape) for p in shape.points)
+        return segment_segment_distances(A, B, p0, p1)
+    if isinstance(shape, Box):
+        c = np.asarray(shape.position if shape.position is not None else np.zeros(dim), dtype=float)[:dim]
+        h = np.asarray(shape.size, dtype=float)[:dim] / 2.0
+        return _box_segments_distance(c, h, A, B, step)
+    return np.array([_shape_segment_distance(shape, a, b, dim, step) for a, b in zip(A, B, strict=True)])
+
+
+@functools.lru_cache(maxsize=256)
+def _unit_samples(n: int) -> Array:
+    """``linspace(0, 1, n)`` (cached; never modified)."""
+    return np.linspace(0.0, 1.0, n)
+
+
+def _box_segments_distance(c: Array, h: Array, A: Array, B: Array, step: float, coarse: int = 17) -> Array:
+    """Signed distances ``(N,)`` from the segments ``[A[i], B[i]]`` to the box of centre ``c`` and
+    half-extents ``h``, sampled at most ``step`` apart near the minimum. The signed distance to a
+    convex set is convex along a segment, so its minimum lies within one coarse interval of the
+    best of ``coarse`` evenly spaced samples; only those two intervals are sampled finely."""
+    D = B - A
+    L = float(np.sqrt((D * D).sum(axis=1).max())) if len(A) else 0.0
+    n = max(2, int(np.ceil(L / step)) + 1)
+    if n <= 2 * coarse:  # short segments: sample them whole
+        T = _unit_samples(n)
+        return box_signed_distance(A[:, None, :] + T[None, :, None] * D[:, None, :], c, h).min(axis=1)
+    T = _unit_samples(coarse)
+    k = box_signed_distance(A[:, None, :] + T[None, :, None] * D[:, None, :], c, h).argmin(axis=1)
+    lo, hi = T[np.maximum(k - 1, 0)], T[np.minimum(k + 1, coarse - 1)]
+    nf = max(2, int(np.ceil(2.0 * L / (coarse - 1) / step)) + 1)
+    tf = lo[:, None] + _unit_samples(nf)[None, :] * (hi - lo)[:, None]  # (N, nf)
+    return box_signed_distance(A[:, None, :] + tf[:, :, None] * D[:, None, :], c, h).min(axis=1)
+
+
+@dataclass(frozen=True)
+class _FingerData:
+    """Static data of one finger for the vectorised clearance."""
+
+    refs: list[BodyRef]
+    r_infl: Array  # (n,) capsule radii (inflated by half the sample step)
+    r_true: Array  # (n,) true link radii
+    fixed_checked: Array  # (n,) bool: the link is checked against fixed bodies (not mounted)
+    any_fixed: bool  # some link is checked against fixed bodies
+    base: Array  # (dim,) base joint position
+    pairs: Array  # (p, 2) own non-adjacent link pairs, then (own link, link of another checked finger)
+    pair_radii: Array  # (p,) sum of the capsule radii of each pair
+    rot_K: list[tuple[Array, Array]] | None  # serial chains: (K, K @ K) of every joint axis
+
+
+@dataclass(frozen=True)
+class CollisionModel:
+    """Capsule model of the hand against the object, the fixed bodies and the other fingers."""
+
+    scene: Scene
+    hand: HandKinematics
+    min_radius: float
+    sample_step: float
+    finger_pairs: frozenset[tuple[int, int]]  # (i, j), i < j: pairs of fingers checked against each other
+    mounted: frozenset[tuple[int, int]]  # (finger, link) overlapping a fixed body in the scene: not checked
+    _cache: dict[Any, Any] = field(default_factory=dict, compare=False, repr=False)
+
+    @classmethod
+    def of(cls, scene: Scene, hand: HandKinematics, min_radius: float | None = None) -> CollisionModel:
+        """The model of a scene. Fingers whose capsules already overlap in the scene as given are
+        taken to move in different layers (a planar hand's fingers stacked in depth, as in the
+        paper's Fig. 1) and are not checked against each other; all other pairs are."""
+        r = 0.01 * object_size(scene) if min_radius is None else min_radius
+        everyone = frozenset((i, j) for i in range(len(hand.fingers)) for j in range(i + 1, len(hand.fingers)))
+        model = cls(scene, hand, r, r, everyone, frozenset())
+        apart = frozenset((i, j) for (i, j) in everyone if model.fingers_distance(i, j, hand.q0) >= 0.0)
+        mounted = frozenset(
+            (f, k) for f in range(len(hand.fingers)) for k, (a, b) in model.segments(f, hand.q0).items()
+            if scene.fixed_bodies and model._fixed_clearance(f, k, a, b) < 0.0
+        )
+        return cls(scene, hand, r, r, apart, mounted)
+
+    def fingers_distance(self, i: int, j: int, q: Array) -> float:
+        """Smallest clearance between the capsules of fingers ``i`` and ``j``."""
+        best = np.inf
+        for a in self.links(i):
+            a0, a1 = self.hand.body_segment(a, q)
+            for b in self.links(j):
+                b0, b1 = self.hand.body_segment(b, q)
+                best = min(best, segment_segment_distance(a0, a1, b0, b1) - self.radius(a) - self.radius(b))
+        return float(best)
+
+    def links(self, finger: int) -> list[BodyRef]:
+        f = self.hand.fingers[finger]
+        return [BodyRef(f"{f.name}/{k}", finger, k) for k in range(f.n_joints)]
+
+    def radius(self, ref: BodyRef, inflate: bool = True) -> float:
+        r = max(self.hand.body_radius(ref), self.min_radius)
+        return r + (self.sample_step / 2.0 if inflate else 0.0)
+
+    def fixed_distance(self, a: Array, b: Array) -> float:
+        best = np.inf
+        for fb in self.scene.fixed_bodies:
+            best = min(best, _shape_segment_distance(fb.shape, a, b, self.scene.dim, self.sample_step))
+        return float(best)
+
+    def finger_clearance(
+        self,
+        finger: int,
+        q: Array,
+        position: Array,
+        rotation: Array,
+        touching: Sequence[BodyRef] = (),
+        allowance: Array | None = None,
+    ) -> float:
+        """Smallest clearance (distance minus capsule radii) of the links of ``finger`` at the hand
+        configuration ``q`` ``(M,)``; negative means collision. Links in ``touching`` may touch
+        the object with their true radius (their clearance to the object is not counted).
+        ``allowance`` (``<= 0``, laid out as :meth:`clearance_terms`) lowers the bound of each
+        term: an overlap that exists at the start of a motion may persist but not grow."""
+        terms = self.clearance_terms(finger, q, position, rotation, touching)
+        if allowance is not None:
+            terms = terms - allowance
+        return float(terms.min()) if terms.size else float(np.inf)
+
+    def start_allowance(self, finger: int, q: Array, position: Array, rotation: Array) -> Array:
+        """The overlaps ``min(0, term)`` of :meth:`clearance_terms` at the start ``q`` of a motion
+        (no link touching): a motion may keep them but not deepen them (see the module notes)."""
+        return np.minimum(0.0, self.clearance_terms(finger, q, position, rotation))
+
+    def clearance_terms(
+        self,
+        finger: int,
+        q: Array,
+        position: Array,
+        rotation: Array,
+        touching: Sequence[BodyRef] = (),
+    ) -> Array:
+        """Every clearance of :meth:`finger_clearance`, one per (link, obstacle) pair, vectorised:
+        ``[object (n), fixed bodies (n), own non-adjacent link pairs, links of other fingers]``
+        (the layout depends on the finger only; pairs that are not checked are ``inf``)."""
+        fd = self._finger_data(finger)
+        n = len(fd.refs)
+        d = self.scene.dim
+        A, B = self.segment_arrays(finger, q)
+        R = np.asarray(rotation, dtype=float)[:d, :d]
+        pos = np.asarray(position, dtype=float)[:d]
+        od = _shape_segments_distance(self.scene.object.shape, (A - pos) @ R, (B - pos) @ R, d, self.sample_step)
+        # a link beyond the last joint (a URDF tip link) is the end of the last capsule
+        touch = np.zeros(n, dtype=bool)
+        for t in touching:
+            if t.finger == finger and t.link is not None:
+                touch[min(int(t.link), n - 1)] = True
+        parts = [np.where(touch, np.maximum(0.0, od - fd.r_true + 1e-9), od - fd.r_infl)]
+        fixed = np.full(n, np.inf)
+        if fd.any_fixed:
+            D = B - A
+            L = np.sqrt((D * D).sum(axis=1))
+            Ab = A - fd.base
+            at_base = (Ab * Ab).sum(axis=1) < 1e-18
+            trim = np.maximum(3.0 * fd.r_infl, BASE_TRIM * L)
+            skip = at_base & (2.0 * trim >= L)
+            A2 = np.where(at_base[:, None], A + D * (trim / np.where(L > 0, L, 1.0))[:, None], A)
+            dist = np.full(n, np.inf)
+            for fb in self.scene.fixed_bodies:
+                dist = np.minimum(dist, _shape_segments_distance(fb.shape, A2, B, d, self.sample_step))
+            fixed = np.where(fd.fixed_checked & ~skip, dist - fd.r_infl, np.inf)
+        parts.append(fixed)
+        others = [j for j in range(len(self.hand.fingers))
+                  if j != finger and (min(j, finger), max(j, finger)) in self.finger_pairs]
+        if others:  # own non-adjacent pairs and every pair with another finger's links, at once
+            segs = [self._segments_cached(j, q) for j in others]
+            S0 = np.vstack([A, *(sg[0] for sg in segs)])
+            S1 = np.vstack([B, *(sg[1] for sg in segs)])
+        else:
+            S0, S1 = A, B
+        i, j = fd.pairs[:, 0], fd.pairs[:, 1]
+        if len(i):
+            parts.append(segment_segment_distances(S0[i], S1[i], S0[j], S1[j]) - fd.pair_radii)
+        return np.concatenate(parts)
+
+    def _finger_data(self, finger: int) -> _FingerData:
+        got = self._cache.get(("finger", finger))
+        if got is None:
+            chain = self.hand.fingers[finger]
+            refs = self.links(finger)
+            n = len(refs)
+            sl = self.hand.finger_slice(finger)
+            rot_K = None
+            if isinstance(chain, SerialChain):
+                rot_K = [(skew(a), skew(a) @ skew(a)) for a in chain.axes]
+            r_infl = np.array([self.radius(r) for r in refs])
+            radii = [r_infl]  # of the stacked segments: own links, then the other checked fingers'
+            for j in range(len(self.hand.fingers)):
+                if j != finger and (min(j, finger), max(j, finger)) in self.finger_pairs:
+                    radii.append(np.array([self.radius(r) for r in self.links(j)]))
+            stacked = np.concatenate(radii)
+            pairs = [(i, j) for i in range(n) for j in range(i + 2, n)]
+            pairs += [(i, j) for i in range(n) for j in range(n, len(stacked))]
+            pa = np.array(pairs, dtype=int).reshape(-1, 2)
+            fixed_checked = np.array([bool(self.scene.fixed_bodies) and (finger, k) not in self.mounted
+                                      for k in range(n)], dtype=bool)
+            got = _FingerData(
+                refs,
+                r_infl,
+                np.array([self.hand.body_radius(r) for r in refs]),
+                fixed_checked,
+                bool(fixed_checked.any()),
+                np.asarray(chain.body_pose(0, self.hand.q0[sl])[1][: self.scene.dim], dtype=float),
+                pa,
+                stacked[pa[:, 0]] + stacked[pa[:, 1]],
+                rot_K,
+            )
+            self._cache[("finger", finger)] = got
+        return got
+
+    def _segments_cached(self, finger: int, q: Array) -> tuple[Array, Array]:
+        """:meth:`segment_arrays` of a finger that does not move (cached by its joint values)."""
+        sl = self.hand.finger_slice(finger)
+        key = ("segs", finger, np.asarray(q[sl], dtype=float).tobytes())
+        got = self._cache.get(key)
+        if got is None:
+            if len(self._cache) > 4096:
+                for k in [k for k in self._cache if k[0] == "segs"]:
+                    del self._cache[k]
+            got = self.segment_arrays(finger, q)
+            self._cache[key] = got
+        return got
+
+    def segment_arrays(self, finger: int, q: Array) -> tuple[Array, Array]:
+        """World end points ``(n, dim)``, ``(n, dim)`` of the link axes of ``finger`` at the hand
+        configuration ``q`` (serial chains: one forward-kinematics pass, Rodrigues' formula with
+        the joint axes' cross-product matrices precomputed)."""
+        chain = self.hand.fingers[finger]
+        d = self.scene.dim
+        qf = np.asarray(q, dtype=float)[self.hand.finger_slice(finger)]
+        fd = self._finger_data(finger)
+        n = len(fd.refs)
+        A = np.empty((n, 3))
+        B = np.empty((n, 3))
+        if isinstance(chain, SerialChain) and fd.rot_K is not None:
+            R, p = chain.base_R, chain.base_p
+            for k in range(n):
+                p = p + R @ chain.origins[k]
+                K, K2 = fd.rot_K[k]
+                R = R @ (_EYE3 + np.sin(qf[k]) * K + (1.0 - np.cos(qf[k])) * K2)
+                end = chain.origins[k + 1] if k + 1 < n else chain.tip
+                A[k], B[k] = p, p + R @ end
+        else:
+            for k in range(n):
+                A[k], B[k] = chain.body_segment(k, qf)
+        return A[:, :d], B[:, :d]
+
+    def _fixed_clearance(self, finger: int, link: int, a: Array, b: Array) -> float:
+        """Clearance of a link to the fixed bodies; a link starting at the finger's base joint
+        (mounted on the palm) is trimmed near it (a zero-length link is the joint itself)."""
+        r = self.radius(self.links(finger)[link])
+        chain = self.hand.fingers[finger]
+        base = chain.body_pose(0, self.hand.q0[self.hand.finger_slice(finger)])[1][: self.scene.dim]
+        if float(np.linalg.norm(a - base)) < 1e-9:
+            L = float(np.linalg.norm(b - a))
+            trim = max(3.0 * r, BASE_TRIM * L)
+            if 2.0 * trim >= L:
+                return np.inf
+            a = a + (b - a) * (trim / L)
+        return self.fixed_distance(a, b) - r
+
+    def segments(self, finger: int, q: Array) -> dict[int, tuple[Array, Array]]:
+        """World end points of every link axis of ``finger`` at the hand configuration ``q``."""
+        A, B = self.segment_arrays(finger, q)
+        return {k: (A[k], B[k]) for k in range(A.shape[0])}
+
+    def lipschitz(self, finger: int) -> float:
+        """Bound on the speed of any point of the finger per unit joint motion (``|dx| <= K |dq|``):
+        ``K = sqrt(sum_j R_j^2)`` with ``R_j`` the reach of the finger beyond joint ``j``."""
+        f = self.hand.fingers[finger]
+        q = self.hand.q0[self.hand.finger_slice(finger)]
+        lengths = []
+        for k in range(f.n_joints):
+            a, b = f.body_segment(k, q)
+            lengths.append(float(np.linalg.norm(b - a)) + float(np.linalg.norm(a - f.body_pose(k, q)[1])))
+        reach = np.cumsum(lengths[::-1])[::-1] + self.min_radius
+        return float(np.sqrt(np.sum(reach**2)))
+
+
+def path_clearance_certified(
+    model: CollisionModel,
+    finger: int,
+    q_full: Array,
+    path: Array,  # (n, m) joint waypoints of the finger
+    position: Array,
+    rotation: Array,
+    touching_last: Sequence[BodyRef] = (),
+    touch_from: int | None = None,
+    allowance: Array | None = None,
+) -> tuple[bool, float, int]:
+    """Check the whole polyline ``path`` (not only its samples): from each checked configuration
+    the next one is at most ``clearance / K`` away in joint space (so every configuration in
+    between is collision-free), never less than :data:`DENSE_STEP`. Segments from waypoint
+    ``touch_from`` on may touch the object with the links ``touching_last``.
+
+    Overlaps present at the first waypoint (``allowance``, by default
+    :meth:`CollisionModel.start_allowance` there) may persist but not deepen: the clearance
+    checked is ``min(term - allowance)`` over every (link, obstacle) term.
+
+    Returns ``(collision_free, smallest clearance, configurations checked)``."""
+    K = model.lipschitz(finger)
+    sl = model.hand.finger_slice(finger)
+    q = np.array(q_full, dtype=float)
+    if allowance is None and len(path):
+        q[sl] = path[0]
+        allowance = model.start_allowance(finger, q, position, rotation)
+    worst, checks = np.inf, 0
+    for s in range(len(path) - 1):
+        touching = touching_last if touch_from is not None and s >= touch_from else ()
+        p0, p1 = path[s], path[s + 1]
+        L = float(np.linalg.norm(p1 - p0))
+        t = 0.0
+        while True:
+            q[sl] = p0 + (p1 - p0) * (t / L if L > 0 else 0.0)
+            c = model.finger_clearance(finger, q, position, rotation, touching, allowance)
+            checks += 1
+            worst = min(worst, c)
+            if c < 0.0:
+                return False, worst, checks
+            if t >= L:
+                break
+            t = min(L, t + max(DENSE_STEP, c / K))
+    return True, float(worst), checks

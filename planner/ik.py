@@ -1,0 +1,163 @@
+"""Inverse kinematics of a fingertip at a new contact (the regrasp D -> F of eq. 33).
+
+The tip (end of the last link's axis) is put at a point of the object surface with the last link
+pointing into the object (``link direction . normal >= min_alignment``):
+
+* scene serial chains: CasADi/IPOPT, ``min |q - seed|^2`` subject to those constraints (one
+  parametric problem per chain, built once);
+* any other :class:`~analysis.kinematics.FingerModel` (URDF fingers evaluated by pinocchio):
+  :func:`numeric_ik`, damped least squares on the point Jacobians within the joint limits
+  (:func:`joint_limits`).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from analysis._types import Array
+from analysis.kinematics import HandKinematics, SerialChain
+
+
+def _chain_tip_symbolic(chain: SerialChain, q: Any) -> tuple[Any, Any]:
+    """World tip position and the direction of the last link, as CasADi expressions."""
+    R: Any = ca.DM(chain.base_R)
+    p: Any = ca.DM(chain.base_p)
+    for j in range(chain.n_joints):
+        p = p + R @ ca.DM(chain.origins[j])
+        a = chain.axes[j]
+        K = ca.DM([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+        R = R @ (ca.DM.eye(3) + ca.sin(q[j]) * K + (1 - ca.cos(q[j])) * (K @ K))
+    tip = p + R @ ca.DM(chain.tip)
+    return tip, R @ ca.DM(chain.tip / max(float(np.linalg.norm(chain.tip)), 1e-12))
+
+
+_IK_SOLVERS: dict[int, tuple[SerialChain, Any]] = {}
+
+
+def _ik_solver(chain: SerialChain, dim: int) -> Any:
+    """The CasADi/IPOPT problem of :func:`fingertip_ik` for one chain (built once, parametric in the
+    seed, the target and the normal)."""
+    got = _IK_SOLVERS.get(id(chain))
+    if got is not None and got[0] is chain:
+        return got[1]
+    n = chain.n_joints
+    q = ca.SX.sym("q", n)
+    tip, axis = _chain_tip_symbolic(chain, q)
+    q0 = ca.SX.sym("q0", n)
+    target = ca.SX.sym("target", dim)
+    normal = ca.SX.sym("normal", dim)
+    g = ca.vertcat(tip[:dim] - target, ca.dot(axis[:dim], normal))
+    nlp = {"x": q, "p": ca.vertcat(q0, target, normal), "f": ca.sumsqr(q - q0), "g": g}
+    opts: dict[str, Any] = {"ipopt.print_level": 0, "print_time": False, "ipopt.max_iter": 200, "ipopt.tol": 1e-10,
+            "ipopt.sb": "yes"}
+    solver = ca.nlpsol("ik", "ipopt", nlp, opts)
+    _IK_SOLVERS[id(chain)] = (chain, solver)
+    return solver
+
+
+def joint_limits(hand: HandKinematics, finger: int) -> tuple[Array, Array]:
+    """Lower and upper joint limits ``(n,)`` of a finger (a URDF finger's ``lower``/``upper``;
+    unbounded for scene serial chains)."""
+    chain = hand.fingers[finger]
+    n = chain.n_joints
+    lo = getattr(chain, "lower", None)
+    hi = getattr(chain, "upper", None)
+    lo_a = np.full(n, -np.inf) if lo is None else np.asarray(lo, dtype=float)
+    hi_a = np.full(n, np.inf) if hi is None else np.asarray(hi, dtype=float)
+    return lo_a, hi_a
+
+
+def numeric_ik(
+    hand: HandKinematics,
+    finger: int,
+    target: Array,  # (d,)
+    normal: Array,  # (d,) unit, into the object
+    seed: Array,  # (n,)
+    min_alignment: float = 0.5,
+    iters: int = 200,
+    damping: float = 1e-3,
+) -> Array | None:
+    """Inverse kinematics of any :class:`~analysis.kinematics.FingerModel` from its point
+    Jacobians: damped least squares from ``seed`` on the tip position (the end of the last link's
+    axis) at ``target``, with one more row raising the alignment ``u . normal`` of the last link
+    (unit axis ``u``) while it is below ``min_alignment + 0.05``; every iterate is clipped to the
+    joint limits (:func:`joint_limits`). Returns the joints ``(n,)`` or ``None`` if it does not
+    converge (tip error above 1e-9 or alignment below ``min_alignment``)."""
+    chain = hand.fingers[finger]
+    d = hand.dim
+    k = chain.n_joints - 1
+    lo, hi = joint_limits(hand, finger)
+    q = np.clip(np.asarray(seed, dtype=float), lo, hi)
+    target = np.asarray(target, dtype=float)[:d]
+    normal = np.asarray(normal, dtype=float)[:d]
+    for _ in range(iters):
+        a, b = chain.body_segment(k, q)
+        a, b = a[:d], b[:d]
+        L = float(np.linalg.norm(b - a))
+        u = (b - a) / max(L, 1e-12)
+        err = target - b
+        align = float(u @ normal)
+        if float(np.linalg.norm(err)) < 1e-9 and align >= min_alignment - 1e-9:
+            return q
+        Jb = chain.point_jacobian(k, np.r_[b, np.zeros(3 - d)] if d < 3 else b, q)[:d]
+        rows, errs = [Jb], [err]
+        if align < min_alignment + 0.05 and L > 1e-9:
+            Ja = chain.point_jacobian(k, np.r_[a, np.zeros(3 - d)] if d < 3 else a, q)[:d]
+            du = (np.eye(d) - np.outer(u, u)) @ (Jb - Ja) / L  # (d, n)
+            rows.append((normal @ du)[None, :])
+            errs.append(np.array([min_alignment + 0.1 - align]))
+        J = np.vstack(rows)
+        e = np.concatenate(errs)
+        dq = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(J.shape[0]), e)
+        nrm = float(np.linalg.norm(dq))
+        if nrm > 0.3:
+            dq *= 0.3 / nrm
+        q = np.clip(q + dq, lo, hi)
+    a, b = chain.body_segment(k, q)
+    u = (b[:d] - a[:d]) / max(float(np.linalg.norm(b[:d] - a[:d])), 1e-12)
+    if float(np.linalg.norm(target - b[:d])) < 1e-9 and float(u @ normal) >= min_alignment - 1e-9:
+        return q
+    return None
+
+
+def fingertip_ik(
+    hand: HandKinematics,
+    finger: int,
+    target: Array,  # (d,) world point on the object surface
+    normal: Array,  # (d,) unit, into the object
+    seeds: Sequence[Array],
+    min_alignment: float = 0.5,
+) -> list[Array]:
+    """Joint configurations ``(n,)`` of ``finger`` whose tip is at ``target`` with the last link
+    pointing into the object (``link direction . normal >= min_alignment``), closest to each seed.
+
+    Serial chains of the scene: CasADi/IPOPT, ``min |q - seed|^2`` subject to those constraints.
+    Any other finger (URDF, evaluated by pinocchio): :func:`numeric_ik` (damped least squares on
+    the point Jacobians, within the joint limits)."""
+    chain = hand.fingers[finger]
+    d = hand.dim
+    out: list[Array] = []
+    if not isinstance(chain, SerialChain):
+        for s in seeds:
+            x = numeric_ik(hand, finger, target, normal, np.asarray(s, dtype=float), min_alignment)
+            if x is not None and all(np.linalg.norm(x - o) > 1e-6 for o in out):
+                out.append(x)
+        return out
+    solver = _ik_solver(chain, d)
+    lbg = np.r_[np.zeros(d), min_alignment]
+    ubg = np.r_[np.zeros(d), np.inf]
+    for s in seeds:
+        s = np.asarray(s, dtype=float)
+        sol = solver(x0=s, p=np.r_[s, target[:d], normal[:d]], lbg=lbg, ubg=ubg)
+        if not solver.stats()["success"]:
+            continue
+        qs = np.asarray(sol["x"]).ravel()
+        qs = s + ((qs - s + np.pi) % (2 * np.pi) - np.pi)  # nearest equivalent to the seed
+        if all(np.linalg.norm(qs - o) > 1e-6 for o in out):
+            out.append(qs)
+    return out
+

@@ -1,0 +1,176 @@
+"""The contact manifold of a grasp state (paper eq. 5, 7 and 19, to every order) and its projection.
+
+In the ambient coordinates ``x = [q (M); s (D)]`` of OMPL's constrained planning (``q`` the hand
+configuration, ``s`` the object displacement from the state's pose, :meth:`analysis.pose.Pose.displaced`),
+:class:`ContactManifold` is ``F(x) = 0``: every sticking contact's body point stays on its object
+point (eq. 7) and every sliding contact keeps touching (eq. 5, normal component only). Its
+Jacobian at ``s = 0`` is ``A_c`` (eq. 19), so its tangent space there is the motion space.
+:func:`project_manifold` projects an ambient point onto it (minimum-norm Newton steps, as OMPL's
+``ProjectedStateSpace`` does); :func:`pose_displacement` gives the ``s`` of a pose vector.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from analysis._types import Array
+from analysis.exceptions import SceneError
+from analysis.geometry import shape_signed_distance
+from analysis.kinematics import BodyRef, HandKinematics
+from analysis.pose import Pose
+from analysis.rotations import skew
+from analysis.scene import Disk, Scene, Sphere
+from planner.state import GraspState
+
+_EYE3 = np.eye(3)
+
+
+def _left_jacobian_so3(w: Array) -> Array:
+    """``J_l(w)`` ``(3, 3)`` of SO(3): ``exp(w + dw) = exp(J_l(w) dw) exp(w)`` to first order."""
+    th = float(np.linalg.norm(w))
+    W = skew(w)
+    if th < 1e-6:
+        return _EYE3 + 0.5 * W + (W @ W) / 6.0
+    return _EYE3 + (1 - np.cos(th)) / th**2 * W + (th - np.sin(th)) / th**3 * (W @ W)
+
+
+class ContactManifold:
+    """The contact manifold of a grasp state's sticking contacts, in the ambient coordinates
+    ``x = [q (M); s (D)]`` of OMPL's constrained planning: ``q`` the hand configuration and ``s``
+    the object displacement from the state's pose (2-D ``(dx, dy, dtheta)``; 3-D ``(dp, w)``, the
+    object at ``p_o + dp`` with rotation ``exp(w) R_0``).
+
+    ``F(x)`` ``(d * n_F + n_S,)`` stacks, for every sticking contact ``i``, the body point minus the
+    object point, ``x_b,i(q) - (p_o + dp + R(s) c_i)``, which is zero on the manifold (the F-points
+    of eq. 7 do not move relative to each other), and for every sliding contact (S or N, disks and
+    spheres only) the gap between the body's surface and the object's, which is zero while it
+    slides (eq. 5: only the normal component is constrained). The Jacobian is ``[J_c, -G^T]`` in
+    these coordinates, so ``F'(x) [dq; ds] = 0`` at ``s = 0`` is ``A_c [dq; dr] = 0`` (eq. 7, 19)."""
+
+    def __init__(self, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
+                 sliding: Sequence[int] = (), scene: Scene | None = None):
+        self.hand, self.state, self.dim = hand, state, state.dim
+        self.start: Pose = state.pose  # the object pose at s = 0
+        self.M, self.D = hand.M, self.start.D
+        self.items: list[tuple[BodyRef | None, Array, Array]] = []  # (finger body or None, point_body, point_obj)
+        for i in sticking:
+            c = state.contacts[i]
+            ref = hand.resolve_body(c.body)
+            assert ref is not None
+            if ref.finger is None:  # a fixed body: its (world) point stays where it is
+                self.items.append((None, state.world_point(i), np.asarray(c.point_object, float)))
+            else:
+                self.items.append((ref, np.asarray(c.point_body, float), np.asarray(c.point_object, float)))
+        self.sliding: list[BodyRef] = []
+        if sliding:
+            if scene is None or not isinstance(scene.object.shape, Disk | Sphere):
+                raise SceneError(("object", "shape"), "sliding contacts are followed for disks and spheres only")
+            self.scene, self.radius = scene, float(scene.object.shape.radius)
+        for i in sliding:
+            ref = hand.resolve_body(state.contacts[i].body)
+            assert ref is not None
+            self.sliding.append(ref)
+        self.rows = self.dim * len(self.items) + len(self.sliding)
+
+    def body_distance(self, ref: BodyRef, c: Array, q: Array) -> tuple[float, Array, Array]:
+        """Distance of the object centre ``c`` ``(d,)`` from the surface of the body ``ref`` at ``q``,
+        the unit vector ``u`` ``(d,)`` from the body towards ``c`` and the closest body point ``(d,)``
+        on the body's axis (fixed bodies: on the surface)."""
+        d = self.dim
+        if ref.finger is None:
+            body = next(b for b in self.scene.fixed_bodies if b.name == ref.name)
+
+            def sd_at(x: Array) -> float:
+                v = shape_signed_distance(body.shape, x, d)
+                assert v is not None  # fixed shapes all have distances
+                return v
+
+            h = 1e-7  # central differences of the body's distance field: its gradient points at c
+            grad = np.array([sd_at(c + h * e) - sd_at(c - h * e) for e in np.eye(d)]) / (2 * h)
+            u = grad / np.linalg.norm(grad)
+            sd = sd_at(c)
+            return sd, u, c - sd * u
+        a, b = self.hand.body_segment(ref, q)
+        a, b = a[:d], b[:d]
+        e = b - a
+        t = float(np.clip((c - a) @ e / max(float(e @ e), 1e-300), 0.0, 1.0))
+        y = a + t * e
+        dist = float(np.linalg.norm(c - y))
+        return dist - self.hand.body_radius(ref), (c - y) / max(dist, 1e-300), y
+
+    def sliding_contact(self, k: int, x: Array) -> tuple[Array, Array, Array]:
+        """Sliding contact ``k`` at ``x``: body point (world ``(d,)``), object point and inward normal
+        (object frame ``(d,)``) where the body touches the disk or sphere."""
+        q, s = x[: self.M], x[self.M:]
+        pose = self.pose(s)
+        _, u, _ = self.body_distance(self.sliding[k], pose.position, q)
+        y = pose.position - self.radius * u  # the touching point, on both surfaces when the gap is zero
+        return y, pose.to_local(y), pose.R_d.T @ u
+
+    def pose(self, s: Array) -> Pose:
+        """The object pose at displacement ``s`` ``(D,)`` from the state's pose."""
+        return self.start.displaced(s)
+
+    def function(self, x: Array) -> Array:
+        """``F(x)`` ``(rows,)``: sticking rows ``x_b,i(q) - x_o,i(s)``, then the sliding gaps."""
+        q, s = x[: self.M], x[self.M:]
+        pose = self.pose(s)
+        d = self.dim
+        out = np.empty(self.rows)
+        for k, (ref, pb, po) in enumerate(self.items):
+            xb = pb[:d] if ref is None else self.hand.point_position(ref, pb, q)
+            out[d * k: d * k + d] = xb - pose.to_world(po)
+        for k, ref in enumerate(self.sliding):  # S-points: the gap to the disk/sphere is zero
+            out[d * len(self.items) + k] = self.body_distance(ref, pose.position, q)[0] - self.radius
+        return out
+
+    def jacobian(self, x: Array) -> Array:
+        """``F'(x)`` ``(rows, M + D)``: ``[J_c, -G^T]`` at ``s = 0``."""
+        q, s = x[: self.M], x[self.M:]
+        pose = self.pose(s)
+        R_d = pose.R_d  # (d, d)
+        d = self.dim
+        J = np.zeros((self.rows, self.M + self.D))  # (d n, M + D)
+        for k, (ref, pb, po) in enumerate(self.items):
+            r = slice(d * k, d * k + d)
+            if ref is not None:
+                J[r, : self.M] = self.hand.point_jacobian(ref, self.hand.point_position(ref, pb, q), q)
+            J[r, self.M: self.M + d] = -np.eye(d)
+            y = R_d @ po  # object point relative to p_o, world frame
+            if d == 2:
+                J[r, self.M + 2] = -np.array([-y[1], y[0]])
+            else:
+                J[r, self.M + 3:] = skew(y) @ _left_jacobian_so3(s[3:])
+        for k, ref in enumerate(self.sliding):  # d gap = u^T (d p_o - J(y) dq); the centre is p_o
+            row = d * len(self.items) + k
+            _, u, yb = self.body_distance(ref, pose.position, q)
+            if ref.finger is not None:
+                J[row, : self.M] = -u @ self.hand.point_jacobian(ref, yb, q)
+            J[row, self.M: self.M + d] = u
+        return J
+
+
+def project_manifold(man: ContactManifold, x: Array, tolerance: float = 1e-11, iters: int = 50) -> tuple[Array, float]:
+    """Newton projection of ``x`` ``(M + D,)`` onto ``F(x) = 0`` with minimum-norm steps (the
+    pseudo-inverse of ``F'``, as OMPL's ``ProjectedStateSpace`` projects); returns the point and
+    ``|F|`` there."""
+    x = np.array(x, dtype=float)
+    res = 0.0
+    for _ in range(iters):
+        F = man.function(x)
+        res = float(np.linalg.norm(F))
+        if res <= tolerance:
+            break
+        x = x - np.linalg.lstsq(man.jacobian(x), F, rcond=None)[0]
+    return x, res
+
+
+def pose_displacement(state: GraspState, pose: Array) -> Array:
+    """The ambient object coordinates ``s`` ``(D,)`` of :class:`ContactManifold` of a pose vector
+    ``(D,)`` (``state.pose.displaced(s)`` is that pose)."""
+    if state.dim == 2:  # the angle difference as given (Pose would re-wrap it through a matrix)
+        return np.asarray(pose, dtype=float) - state.pose.vector()
+    return Pose.from_vector(pose, state.dim).displacement_from(state.pose)
+

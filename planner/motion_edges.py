@@ -1,0 +1,177 @@
+"""Object-motion edges (paper eq. 30-32): the object moves along a DAFC direction.
+
+With the contacts of a set ``S_D`` in state D (by default the contacts on fixed bodies: the palm
+lets go), possibly the fixed-body contacts sliding (S, disks and spheres) and the others F, the
+combination is feasible (18 and 22), the direction is a DAFC member, and the torque set T (32) is
+not empty; its recommended torque and the motion ``dzeta_c`` chosen by (31) move the object until
+the D-contacts have separated by ``clearance`` (towards a goal pose: at most ``motion_step``).
+The path of hand and object on the contact manifold ``A_c [dq; dr] = 0`` is integrated
+(:func:`~planner.object_motion.integrate_object_motion`) and then planned by OMPL's constrained
+planning (:func:`~planner.object_motion.plan_object_motion`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from analysis._types import Array
+from analysis.exceptions import CTPError
+from analysis.pose import Pose
+from analysis.scene import Disk, Sphere
+from analysis.torques import torque_set
+from planner.manifold import ContactManifold
+from planner.nodes import GraphNodes
+from planner.object_motion import ConstrainedObjectMotion, integrate_object_motion, keep_contacts, plan_object_motion
+from planner.state import GraspContact, GraspState
+from planner.transition import ObjectMotionFigures, Transition
+
+
+def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Transition, GraspState]]:
+    """Eq. (30)-(32): move the object along a DAFC direction; the D-contacts separate."""
+    hand, goal, options, size = nodes.hand, nodes.goal, nodes.options, nodes.size
+    out = []
+    sa = nodes.analysis(state)
+    L = state.L
+    fixed = tuple(i for i, c in enumerate(state.contacts) if hand.finger_of(c.body) is None)
+    if options.separate_finger_contacts:
+        subsets: list[tuple[int, ...]] = [(i,) for i in range(L)] if L > 1 else []
+        if len(fixed) > 1 and len(fixed) < L:
+            subsets.append(fixed)
+    else:  # fingers let go by regrasp edges; an object motion separates the fixed bodies
+        subsets = [fixed] if fixed and len(fixed) < L else []
+    if goal.type == "pose":
+        subsets.append(())
+    plans: list[tuple[tuple[int, ...], tuple[int, ...]]] = [(dset, ()) for dset in subsets]  # (D-set, S-set)
+    slide = options.sliding_motions
+    if (goal.type == "pose" if slide is None else slide) and fixed and len(fixed) < L \
+            and isinstance(nodes.scene.object.shape, Disk | Sphere):
+        plans.append(((), fixed))
+    for dset, sset in plans:
+        comb = _letters(state, dset, sset)
+        best = None
+        with nodes.timings.measure("analysis"):
+            summ = sa.summary(comb)
+            if summ.feasible:
+                p = sa.parts(comb)
+                oracle = p.oracle()
+                grasp = sa.stationary(comb)
+                assert grasp is not None
+                cands = _direction_candidates(nodes, state, p, dset, summ.example_direction)
+                for dr in cands:
+                    if not oracle.test(dr).member:
+                        continue
+                    try:
+                        ts = torque_set(p.system, p.sel, p.ms, p.st, p.fs, grasp, dr, oracle=oracle)
+                    except CTPError:
+                        nodes.reject("torque set (32) empty for a DAFC direction")
+                        continue
+                    motion = np.concatenate([ts.dq, ts.direction])  # (M + D,) per unit object motion
+                    rates = -(p.ms.A_d @ motion) if dset else np.zeros(0)
+                    if dset and float(np.min(rates)) <= 1e-6:
+                        continue
+                    best = (ts, rates, grasp)
+                    break
+        if not summ.feasible:
+            nodes.reject(f"object motion: {summ.reason}")
+            continue
+        if best is None:
+            nodes.reject("object motion: no DAFC direction with a torque set that separates the D-contacts"
+                         if dset else "object motion: no DAFC direction towards the goal with a torque set")
+            continue
+        ts, rates, grasp = best
+        if dset:
+            dist = min(options.clearance * size / float(np.min(rates)), 0.5 * size)
+        elif goal.type == "pose":
+            assert goal.pose is not None
+            dist = min(float(np.linalg.norm(np.asarray(goal.pose) - state.pose_vector())), options.motion_step * size)
+        else:
+            dist = options.motion_step * size
+        keep = [i for i in range(L) if i not in dset and i not in sset]
+        with nodes.timings.measure("motion"):
+            straight = integrate_object_motion(nodes.model, state, ts.direction, ts.dq, keep, list(dset), dist,
+                                               check_path=False, sliding=sset)
+        if straight is None:
+            nodes.reject("object motion leaves the contact manifold or its end collides")
+            continue
+        with nodes.timings.measure("ompl"):
+            om = plan_object_motion(nodes.model, state, straight, keep, list(dset), seed=options.seed,
+                                    time_limit=options.ompl_time, sliding=sset)
+        if om is None:
+            nodes.reject("OMPL found no collision-free object motion on the contact manifold")
+            continue
+        end = state.with_contacts(_slid_contacts(nodes, state, sset, om), om.q_path[-1])
+        final = end.with_pose(Pose.from_vector(om.pose_path[-1], state.dim))
+        new = keep_contacts(final, sorted(keep + list(sset)), om.q_path[-1])
+        if nodes.held(new) is None:
+            continue
+        jl = float(np.sum(np.linalg.norm(np.diff(om.q_path, axis=0), axis=1)))
+        cost = jl + om.length / size + options.effort_weight * float(np.linalg.norm(ts.tau))
+        torques = {"direction": ts.direction.tolist(), "dq": ts.dq.tolist(), "phi": ts.phi,
+                   "vertices": None if ts.generators is None else int(ts.generators.vertices.shape[0]),
+                   "rays": None if ts.generators is None else int(ts.generators.all_directions().shape[0]),
+                   "dim_force_polyhedron": ts.dim_P, "work": ts.work, "nlp_status": ts.nlp_status}
+        figures = ObjectMotionFigures(
+            summ.dim_dafc, summ.a_bar, tuple(rates.tolist()), tuple(om.separations.tolist()), tuple(sset),
+            om.length, om.max_residual, om.planner_states, om.states_checked, om.max_joint_step, om.ompl_seconds)
+        t = Transition("object_motion", comb, state.bodies(), new.bodies(), om.q_path, om.pose_path, grasp.tau,
+                       ts.tau, torques, figures, cost)
+        out.append((t, new))
+    return out
+
+
+def _slid_contacts(nodes: GraphNodes, state: GraspState, sset: tuple[int, ...],
+                   om: ConstrainedObjectMotion) -> tuple[GraspContact, ...]:
+    """The contacts after an object motion: sliding ones (``sset``) where their bodies touch the
+    object at the end (new points on the body and the object), the others unchanged."""
+    if not sset:
+        return state.contacts
+    man = ContactManifold(nodes.hand, state, [], sset, nodes.scene)
+    x = np.concatenate([om.q_path[-1], om.displacement_path[-1]])
+    out = list(state.contacts)
+    for k, i in enumerate(sset):
+        y, p_obj, n_obj = man.sliding_contact(k, x)
+        ref = man.sliding[k]
+        c = state.contacts[i]
+        out[i] = GraspContact(c.body, nodes.hand.to_local(ref, y, om.q_path[-1]), p_obj, n_obj, c.mu)
+    return tuple(out)
+
+
+def _direction_candidates(nodes: GraphNodes, state: GraspState, p: Any, dset: tuple[int, ...],
+                          example: Array | None) -> list[Array]:
+    """Unit object directions ``(D,)`` to try, in the motion space: towards the goal pose, away
+    from the D-contacts (the sum of their inward normals), the analysis' example direction."""
+    D = p.system.D
+    Lr = p.ms.Lambda_r_t
+    cands: list[Array] = []
+    goal = nodes.goal
+    if goal.type == "pose" and goal.pose is not None:
+        cands.append(np.asarray(goal.pose, float) - state.pose_vector())
+    if dset:
+        # the object moves away from the D-contacts: along the sum of their inward normals
+        v = np.zeros(D)
+        v[: state.dim] = sum(state.world_normal(i) for i in dset)
+        cands.append(v)
+    if example is not None:
+        cands.append(example)
+    out = []
+    for c in cands:
+        c = Lr @ (Lr.T @ c)
+        if np.linalg.norm(c) > 1e-9:
+            out.append(c / np.linalg.norm(c))
+    return out
+
+
+def _letters(state: GraspState, dset: tuple[int, ...], sset: tuple[int, ...]) -> str:
+    """The combination of an object motion: D for ``dset``, S (N without friction) for ``sset``,
+    F (N) for the others."""
+    out = []
+    for i, c in enumerate(state.contacts):
+        if i in dset:
+            out.append("D")
+        elif c.mu <= 0:
+            out.append("N")
+        else:
+            out.append("S" if i in sset else "F")
+    return "".join(out)

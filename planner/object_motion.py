@@ -1,0 +1,323 @@
+"""Object motions (paper eq. 30-32): integration of the motion chosen by (31), then OMPL's
+constrained planning on the contact manifold.
+
+The analysis fixes the start, the direction ``dr`` (a DAFC member) and the finger motion ``dq``
+chosen by (31). :func:`integrate_object_motion` follows them in small steps on
+``A_c [dq; dr] = 0``, each projected back onto the contact manifold (Gauss-Newton on ``q``,
+:func:`project_contacts`: each F-point's body point coincides with its object point; with sliding
+contacts, :func:`~planner.manifold.project_manifold` on hand and object together), which gives the
+end configuration (the D-contacts separated by the planned clearance). :func:`plan_object_motion`
+then plans the path between the two ends with OMPL's constrained planning: a
+``ProjectedStateSpace`` over ``x = [q; s]`` (hand configuration and object displacement) with the
+constraint :class:`~planner.manifold.ContactManifold` (the F-points stay together, exactly, not
+only to first order), ``RRTConnect`` whose motions are manifold geodesics checked for joint limits
+and collisions, and the solution densified on the manifold until no joint moves more than
+:data:`~planner.collision.DENSE_STEP` between checked states, each of which is checked again.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from ompl import base as ob
+from ompl import geometric as og
+from ompl import util as ou
+
+from analysis._types import Array
+from analysis.geometry import shape_signed_distance
+from analysis.kinematics import BodyRef, HandKinematics
+from analysis.pose import Pose
+from planner.collision import DENSE_STEP, CollisionModel
+from planner.ik import joint_limits
+from planner.manifold import ContactManifold, pose_displacement, project_manifold
+from planner.state import GraspContact, GraspState
+
+
+@dataclass(frozen=True)
+class ObjectMotion:
+    """An integrated object motion: hand and object paths, the final contacts."""
+
+    q_path: Array  # (n, M)
+    pose_path: Array  # (n, D) pose vectors
+    separations: Array  # (#D,) final gap of each separating contact
+    length: float  # object path length (pose-vector norm)
+    max_residual: float  # largest contact-constraint residual after projection
+
+
+def project_contacts(
+    hand: HandKinematics, state: GraspState, q: Array, sticking: Sequence[int], iters: int = 30
+) -> tuple[Array, float]:
+    """Gauss-Newton projection of ``q`` onto the manifold of the sticking contacts: body point
+    (``point_body`` on its body at ``q``) = object point (``point_object`` at the state's pose)."""
+    q = np.array(q, dtype=float)
+    res = 0.0
+    for _ in range(iters):
+        rows, errs = [], []
+        for i in sticking:
+            c = state.contacts[i]
+            ref = hand.resolve_body(c.body)
+            assert ref is not None
+            if ref.finger is None:
+                continue
+            x = hand.point_position(ref, c.point_body, q)
+            errs.append(state.world_point(i) - x)
+            rows.append(hand.point_jacobian(ref, x, q))
+        if not rows:
+            return q, 0.0
+        e = np.concatenate(errs)
+        res = float(np.linalg.norm(e))
+        if res < 1e-11:
+            break
+        q = q + np.linalg.lstsq(np.vstack(rows), e, rcond=None)[0]
+    return q, res
+
+
+def moved(state: GraspState, pose_step: Array) -> GraspState:
+    """The state with the object displaced by ``pose_step`` ``(D,)`` (``dr`` of the paper: 2-D
+    ``(dx, dy, dtheta)``; 3-D ``(dp, w)`` with ``w`` a world rotation vector)."""
+    return state.with_pose(state.pose.displaced(pose_step))
+
+
+@dataclass(frozen=True)
+class _MotionCheck:
+    """Validity of hand configurations during an object motion that starts at ``state``: joint
+    limits, and collisions with the contact links (``busy``) allowed to touch the object and the
+    overlaps present at the start allowed to persist (:meth:`CollisionModel.start_allowance`)."""
+
+    model: CollisionModel
+    touching: list[list[BodyRef]]  # per finger
+    allow: list[Array]  # per finger
+    limits: list[tuple[Array, Array]]  # per finger
+
+    @classmethod
+    def of(cls, model: CollisionModel, state: GraspState, busy: Sequence[int]) -> _MotionCheck:
+        hand = model.hand
+        refs = [hand.resolve_body(state.contacts[i].body) for i in busy]
+        F = range(len(hand.fingers))
+        return cls(model, [[b for b in refs if b is not None and b.finger == f] for f in F],
+                   [model.start_allowance(f, state.q, state.position, state.rotation) for f in F],
+                   [joint_limits(hand, f) for f in F])
+
+    def __call__(self, q: Array, pose: Pose) -> bool:
+        """Is the hand configuration ``q`` ``(M,)`` valid with the object at ``pose``?"""
+        hand = self.model.hand
+        position, rotation = pose.position, pose.rotation
+        for f in range(len(hand.fingers)):
+            qf = q[hand.finger_slice(f)]
+            if np.any(qf < self.limits[f][0] - 1e-9) or np.any(qf > self.limits[f][1] + 1e-9):
+                return False
+            if self.model.finger_clearance(f, q, position, rotation, self.touching[f], self.allow[f]) < -1e-9:
+                return False
+        return True
+
+
+def integrate_object_motion(
+    model: CollisionModel,
+    state: GraspState,
+    dr: Array,  # (D,) unit object direction
+    dq: Array,  # (M,) finger motion per unit object motion (eq. 31)
+    sticking: Sequence[int],
+    separating: Sequence[int],
+    distance: float,
+    steps: int = 20,
+    check_path: bool = True,
+    sliding: Sequence[int] = (),
+) -> ObjectMotion | None:
+    """Move the object by ``distance`` along ``dr`` with the fingers along ``dq``, projecting on
+    the sticking contacts after every step; ``None`` if a link would penetrate the object or a
+    separating contact would not separate. With ``check_path = False`` only the end configuration
+    is checked for collisions (the path is then planned by :func:`plan_object_motion`).
+
+    ``sliding`` contacts (S or N; disk and sphere objects) keep touching while they slide: the
+    object then follows the projection of ``[q; s] + h [dq; dr]`` onto :class:`ContactManifold`
+    (minimum-norm Newton steps on hand and object together), not exactly the straight line."""
+    hand = model.hand
+    man = ContactManifold(hand, state, sticking, sliding, model.scene) if sliding else None
+    x = np.concatenate([state.q, np.zeros(len(dr))])
+    h = distance / steps
+    cur = state
+    q = state.q.copy()
+    qs, poses = [q.copy()], [state.pose_vector()]
+    worst_res = 0.0
+    valid = _MotionCheck.of(model, state, (*sticking, *separating, *sliding))
+    for _ in range(steps):
+        if man is None:
+            cur = moved(cur, h * dr)
+            q, res = project_contacts(hand, cur, q + h * dq, sticking)
+        else:
+            x, res = project_manifold(man, x + h * np.concatenate([dq, dr]))
+            q = x[: hand.M]
+            cur = cur.with_pose(man.pose(x[hand.M:]), q)
+        worst_res = max(worst_res, res)
+        if res > 1e-6:
+            return None
+        cur = GraspState(cur.contacts, q, cur.position, cur.rotation, cur.dim)
+        qs.append(q.copy())
+        poses.append(cur.pose_vector())
+        if not check_path and len(qs) <= steps:
+            continue
+        if not valid(q, cur.pose):
+            return None
+    seps = []
+    for i in separating:
+        c = state.contacts[i]
+        ref = hand.resolve_body(c.body)
+        assert ref is not None
+        x = hand.point_position(ref, c.point_body, q)
+        sd = shape_signed_distance(model.scene.object.shape, cur.pose.to_local(x), cur.dim)
+        seps.append(np.inf if sd is None else sd)
+    seps_a = np.array(seps, dtype=float)
+    if len(seps_a) and np.any(seps_a <= 0.0):
+        return None
+    length = float(np.sum(np.linalg.norm(np.diff(np.array(poses), axis=0), axis=1)))
+    return ObjectMotion(np.array(qs), np.array(poses), seps_a, length, worst_res)
+
+
+def keep_contacts(state: GraspState, keep: Sequence[int], q: Array) -> GraspState:
+    """The state after a motion: only the contacts ``keep``, the hand at ``q``, the object where it
+    is in ``state``."""
+    contacts: tuple[GraspContact, ...] = tuple(state.contacts[i] for i in keep)
+    return state.with_contacts(contacts, q)
+
+
+@dataclass(frozen=True)
+class ConstrainedObjectMotion:
+    """An object motion planned by OMPL on the contact manifold (:func:`plan_object_motion`)."""
+
+    q_path: Array  # (n, M) hand configurations
+    pose_path: Array  # (n, D) object pose vectors
+    displacement_path: Array  # (n, D) the ambient object coordinates s of ContactManifold
+    separations: Array  # (#D,) final gap of each separating contact
+    length: float  # object path length (pose-vector norm)
+    max_residual: float  # largest |F(x)| over the dense path
+    max_joint_step: float  # largest joint-space step between consecutive checked states
+    states_checked: int
+    planner_states: int  # states of the solution path before densification
+    ompl_seconds: float
+
+
+def plan_object_motion(
+    model: CollisionModel,
+    state: GraspState,
+    goal: ObjectMotion,
+    sticking: Sequence[int],
+    separating: Sequence[int],
+    seed: int = 0,
+    time_limit: float = 1.0,
+    tolerance: float = 1e-8,
+    sliding: Sequence[int] = (),
+) -> ConstrainedObjectMotion | None:
+    """Plan the motion of hand and object from ``state`` to the end of ``goal`` (the configuration
+    reached along the DAFC direction, :func:`integrate_object_motion`) with OMPL's constrained
+    planning: a ``ProjectedStateSpace`` over ``[q; s]`` with the constraint
+    :class:`ContactManifold` of the sticking and ``sliding`` contacts (``A_c [dq; dr] = 0``, eq. 7
+    and 19, to every order), ``RRTConnect`` (seeded) whose motions are geodesics of the manifold, a validity
+    checker for joint limits and collisions (:meth:`CollisionModel.finger_clearance`; the contact
+    links may touch the object, overlaps present at the start may not deepen), and the solution
+    densified on the manifold until no joint moves more than :data:`DENSE_STEP` between two
+    checked states, every one of which is re-checked (constraint residual below
+    ``100 * tolerance`` and collision-free). ``None`` if OMPL finds no path or the check fails."""
+    hand = model.hand
+    man = ContactManifold(hand, state, sticking, sliding, model.scene)
+    M, D = man.M, man.D
+    n = M + D
+    q0, q1 = state.q, goal.q_path[-1]
+    s1 = pose_displacement(state, goal.pose_path[-1])
+    x0, x1 = np.concatenate([q0, np.zeros(D)]), np.concatenate([q1, s1])
+    check = _MotionCheck.of(model, state, (*sticking, *separating, *sliding))
+    limits = check.limits
+
+    def valid(x: Array) -> bool:
+        return check(x[:M], man.pose(x[M:]))
+
+    if man.rows == 0 or not valid(x0) or not valid(x1):
+        return None
+    if float(np.linalg.norm(man.function(x1))) > 100 * tolerance:
+        return None
+
+    class _Constraint(ob.Constraint):
+        def __init__(self) -> None:
+            super().__init__(n, man.rows)
+
+        def function(self, x: Any, out: Any) -> None:
+            out[:] = man.function(np.asarray(x))
+
+        def jacobian(self, x: Any, out: Any) -> None:
+            out[:, :] = man.jacobian(np.asarray(x))
+
+    ou.setLogLevel(ou.LOG_NONE)
+    ou.RNG.setSeed(int(seed) + 1)
+    constraint = _Constraint()
+    constraint.setTolerance(tolerance)
+    constraint.setMaxIterations(100)
+    rank = int(np.linalg.matrix_rank(man.jacobian(x0), tol=1e-9))
+    constraint.setManifoldDimension(n - rank)
+    span = np.abs(x1 - x0)
+    margin = np.maximum(span, 1e-3)
+    lo, hi = np.minimum(x0, x1) - margin, np.maximum(x0, x1) + margin
+    for f in range(len(hand.fingers)):  # joint limits bound the ambient box too
+        sl = hand.finger_slice(f)
+        lo[sl] = np.maximum(lo[sl], np.minimum(limits[f][0], np.minimum(x0[sl], x1[sl])))
+        hi[sl] = np.minimum(hi[sl], np.maximum(limits[f][1], np.maximum(x0[sl], x1[sl])))
+    ambient = ob.RealVectorStateSpace(n)
+    bounds = ob.RealVectorBounds(n)
+    for j in range(n):
+        bounds.setLow(j, float(lo[j]))
+        bounds.setHigh(j, float(hi[j]))
+    ambient.setBounds(bounds)
+    space = ob.ProjectedStateSpace(ambient, constraint)
+    si = ob.ConstrainedSpaceInformation(space)
+    total = float(np.linalg.norm(x1 - x0))
+    space.setDelta(max(total / 20.0, 1e-6))  # geodesic step: at least 20 checked states per motion
+
+    def read(st: Any) -> Array:
+        return np.array([space.getValueAddressAtIndex(st, j) for j in range(n)])
+
+    ss = og.SimpleSetup(si)
+    ss.setStateValidityChecker(lambda st: valid(read(st)))
+    a, b = space.allocState(), space.allocState()
+    a.copy([float(v) for v in x0])
+    b.copy([float(v) for v in x1])
+    ss.setStartAndGoalStates(a, b, 1e-9)
+    planner = og.RRTConnect(si)
+    planner.setRange(max(total, 1e-6))  # try the direct geodesic first
+    ss.setPlanner(planner)
+    t0 = time.perf_counter()
+    status = ss.solve(time_limit)
+    if not bool(status) or not ss.haveExactSolutionPath():
+        return None
+    path = ss.getSolutionPath()
+    planner_states = int(path.getStateCount())
+    X = np.array([read(path.getState(i)) for i in range(path.getStateCount())])  # (k, n)
+    X = _densify(man, X, DENSE_STEP, tolerance)
+    dt = time.perf_counter() - t0
+    step = float(np.max(np.abs(np.diff(X[:, :M], axis=0)))) if len(X) > 1 else 0.0
+    residual = max(float(np.linalg.norm(man.function(x))) for x in X)
+    if step > DENSE_STEP or residual > 100 * tolerance or not all(valid(x) for x in X):
+        return None
+    if float(np.max(np.abs(X[-1] - x1))) > 1e-6:
+        return None
+    poses = np.array([man.pose(x[M:]).vector() for x in X])  # (k, D)
+    length = float(np.sum(np.linalg.norm(np.diff(poses, axis=0), axis=1)))
+    return ConstrainedObjectMotion(X[:, :M], poses, X[:, M:], goal.separations, length, residual, step, len(X),
+                                   planner_states, dt)
+
+
+def _densify(man: ContactManifold, X: Array, max_step: float, tolerance: float) -> Array:
+    """Insert states between consecutive states of ``X`` ``(k, M + D)`` so that no joint moves more
+    than ``max_step``: points of the ambient segment projected back onto the manifold (Newton steps
+    with the pseudo-inverse of ``F'``, as OMPL's projection does)."""
+    M = man.M
+    out = [X[0]]
+    for a, b in itertools.pairwise(X):
+        k = int(np.ceil(float(np.max(np.abs(b[:M] - a[:M]))) / max_step * 1.02))
+        for t in np.arange(1, k) / max(k, 1):
+            out.append(project_manifold(man, a + t * (b - a), tolerance)[0])
+        out.append(b)
+    return np.array(out)
+

@@ -1,0 +1,152 @@
+"""Collision-free finger transfers (the regrasp D -> F of eq. 33 with ``dr = 0``), planned by OMPL.
+
+A free finger moves from its configuration to a new contact whose touching configuration
+``q_goal`` comes from :mod:`planner.ik`: OMPL (RRTConnect, seeded, bounded by the joint limits)
+plans to a pre-contact configuration backed off by ``approach`` along the last link
+(:func:`_back_off`); the last approach is a joint-space segment on which only the tip may touch.
+:func:`~planner.collision.path_clearance_certified` then checks the whole path (every
+configuration, not only samples, is collision-free; overlaps present at the start may persist but
+not deepen).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from ompl import base as ob
+from ompl import geometric as og
+from ompl import util as ou
+
+from analysis._types import Array
+from analysis.kinematics import BodyRef
+from planner.collision import CollisionModel, path_clearance_certified
+from planner.ik import joint_limits
+from planner.state import GraspState
+
+
+@dataclass(frozen=True)
+class TransferPath:
+    """A finger's collision-free transfer to a new contact."""
+
+    finger: int
+    waypoints: Array  # (n, m) joint configurations of the finger, last one touching
+    length: float  # joint-space length
+    clearance: float  # smallest clearance along the free part
+    checks: int
+    ompl_seconds: float
+
+
+def plan_transfer(
+    model: CollisionModel,
+    state: GraspState,
+    finger: int,
+    q_goal: Array,  # (m,) touching configuration of the finger
+    tip_ref: BodyRef,
+    approach: float,
+    seed: int = 0,
+    time_limit: float = 1.0,
+) -> TransferPath | None:
+    """Plan a collision-free joint path (OMPL RRTConnect, seeded) from the finger's configuration
+    in ``state`` to ``q_goal``, through a pre-contact configuration backed off by ``approach``
+    (scene units) along the normal. ``None`` when no certified path is found."""
+    hand = model.hand
+    sl = hand.finger_slice(finger)
+    m = sl.stop - sl.start
+    q_full = state.q.copy()
+    pos, rot = state.position, state.rotation
+    allow = model.start_allowance(finger, q_full, pos, rot)  # overlaps at the start may not deepen
+    # pre-contact: back the joints off along the last link until the clearance is positive
+    q_pre = _back_off(model, finger, q_full, q_goal, tip_ref, approach, pos, rot, allow)
+    if q_pre is None:
+        return None
+    start = state.q[sl]
+    j_lo, j_hi = joint_limits(hand, finger)
+
+    def valid_q(x: Array) -> bool:
+        if np.any(x < j_lo - 1e-9) or np.any(x > j_hi + 1e-9):
+            return False
+        qq = q_full.copy()
+        qq[sl] = x
+        return model.finger_clearance(finger, qq, pos, rot, (), allow) >= 0.0
+
+    if not valid_q(start):
+        return None
+    ou.setLogLevel(ou.LOG_NONE)
+    ou.RNG.setSeed(int(seed) + 1)
+    space = ob.RealVectorStateSpace(m)
+    bounds = ob.RealVectorBounds(m)
+    lo = np.maximum(np.minimum(start, q_pre) - np.pi, np.minimum(j_lo, np.minimum(start, q_pre)))
+    hi = np.minimum(np.maximum(start, q_pre) + np.pi, np.maximum(j_hi, np.maximum(start, q_pre)))
+    for j in range(m):
+        bounds.setLow(j, float(lo[j]))
+        bounds.setHigh(j, float(hi[j]))
+    space.setBounds(bounds)
+    s0, s1 = space.allocState(), space.allocState()
+    for j in range(m):
+        s0[j] = float(start[j])
+        s1[j] = float(q_pre[j])
+    extent = max(1e-9, float(np.linalg.norm(hi - lo)))
+    t0 = time.perf_counter()
+    # coarse collision checks while planning (0.05 rad), then the certificate; once more with
+    # fine checks (0.01 rad) if the certificate rejects the coarse path
+    for resolution in (0.05, 0.01):
+        ss = og.SimpleSetup(space)
+        ss.setStateValidityChecker(lambda s: valid_q(np.array([s[j] for j in range(m)])))
+        si = ss.getSpaceInformation()
+        si.setStateValidityCheckingResolution(resolution / extent)
+        ss.setStartAndGoalStates(s0, s1)
+        ss.setPlanner(og.RRTConnect(si))
+        status = ss.solve(time_limit)
+        if not bool(status) or not ss.haveExactSolutionPath():
+            return None
+        ss.simplifySolution(min(0.5, time_limit))
+        p = ss.getSolutionPath()
+        free = np.array([[p.getState(i)[j] for j in range(m)] for i in range(p.getStateCount())])
+        waypoints = np.vstack([free, q_goal[None, :]])
+        ok, clear, checks = path_clearance_certified(
+            model, finger, q_full, waypoints, pos, rot, touching_last=[tip_ref], touch_from=len(free) - 1,
+            allowance=allow,
+        )
+        if ok:
+            break
+    else:
+        return None
+    dt = time.perf_counter() - t0
+    length = float(np.sum(np.linalg.norm(np.diff(waypoints, axis=0), axis=1)))
+    return TransferPath(finger, waypoints, length, clear, checks, dt)
+
+
+def _back_off(
+    model: CollisionModel,
+    finger: int,
+    q_full: Array,
+    q_goal: Array,
+    tip_ref: BodyRef,
+    approach: float,
+    pos: Array,
+    rot: Array,
+    allowance: Array | None = None,
+) -> Array | None:
+    """A configuration near ``q_goal`` whose tip is ``approach`` back along the tip's velocity
+    that leaves the surface (least-squares step on the tip Jacobian) and that is collision-free."""
+    hand = model.hand
+    sl = hand.finger_slice(finger)
+    qq = q_full.copy()
+    qq[sl] = q_goal
+    a, b = hand.body_segment(tip_ref, qq)
+    u = (b - a) / max(float(np.linalg.norm(b - a)), 1e-12)  # last link direction, into the object
+    for scale in (1.0, 2.0, 4.0):
+        x = qq.copy()
+        for _ in range(20):  # move the tip back along -u by `approach * scale`
+            tip = hand.body_segment(tip_ref, x)[1]
+            err = (b - approach * scale * u) - tip
+            if np.linalg.norm(err) < 1e-9:
+                break
+            J = hand.point_jacobian(tip_ref, tip, x)[:, sl]
+            x[sl] = np.clip(x[sl] + np.linalg.lstsq(J, err, rcond=None)[0], *joint_limits(hand, finger))
+        if model.finger_clearance(finger, x, pos, rot, (), allowance) > 0.0:
+            return np.asarray(x[sl])
+    return None
+
