@@ -30,11 +30,12 @@ from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
 from analysis.exceptions import SolverError
 from analysis.friction import FrictionSet, kinetic_friction
-from analysis.linalg import null_space, rank
+from analysis.linalg import rank
 from analysis.motion import MotionSpace
 from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators
 from analysis.solvers.highs import LPModel, solve_lp
 from analysis.statics import Statics
+from analysis.torque_conditions import torque_conditions
 
 #: Relative tolerance on "positive work" and on non-penetration.
 WORK_TOL = 1e-9
@@ -241,33 +242,27 @@ class DAFCOracle:
 
         DAFC (22) has no ``W_3`` condition; T also asks the net wrench in the motion space to be
         parallel to the motion (``N_u^T Lambda~_r^T w = 0``) with positive work. With the slips
-        of ``t.zeta_c`` fixed this is one LP in ``f_c`` (the same as :mod:`analysis.torques`).
-        A member can fail it robustly (SSSSS, or DDSSS away from the realisable sub-cone), so
-        the example direction of a combination prefers members that pass it.
+        of ``t.zeta_c`` fixed this is the largest-work LP of the torque set's conditions
+        (:mod:`analysis.torque_conditions`, the one :mod:`analysis.torques` solves first). A
+        member can fail it robustly (SSSSS, or DDSSS away from the realisable sub-cone), so the
+        example direction of a combination prefers members that pass it.
         """
         if not t.member or t.zeta_c is None:
             return False
-        sy, st, ms, u = self.system, self.st, self.ms, t.u
-        G_eff = st.G_c
-        if self.sel.s_index:
-            G_eff = st.G_c + kinetic_friction(sy, self.sel, self.slips_of(t.zeta_c)).G_w
-        N_u = null_space(u[None, :]) if ms.a_bar > 1 else np.zeros((ms.a_bar, 0))
-        E = np.vstack([self.Xi.T, N_u.T @ ms.Lambda_r_t.T])  # (p + a_bar - 1, D): E w = 0
-        work_row = u @ ms.Lambda_r_t.T @ G_eff
-        work0 = float(u @ ms.Lambda_r_t.T @ sy.w_ex)
+        sy = self.system
+        tc = torque_conditions(sy, self.sel, self.ms, self.st, self.fs, t.u,
+                               self.slips_of(t.zeta_c) if self.sel.s_index else None)
         tol = WORK_TOL * (1.0 + float(np.linalg.norm(sy.w_ex)))
-        if G_eff.shape[1] == 0:
-            return bool(work0 > tol and np.all(np.abs(E @ sy.w_ex) <= tol))
+        if tc.L_c == 0:  # no forces: the external wrench alone must do it
+            return bool(tc.work0 > tol and np.all(np.abs(tc.b_eq) <= tol))
         try:
-            res = solve_lp(work_row, A_ub=np.vstack([self.fs.C, -work_row[None, :]]),
-                           b_ub=np.r_[np.zeros(self.fs.C.shape[0]), work0], A_eq=E @ G_eff, b_eq=-(E @ sy.w_ex),
-                           maximize=True)
+            res = tc.max_work()
         except SolverError:
             return False  # undecided: only a preference among members hangs on it
         self.lp_count += 1
         if res.status == "unbounded":
             return True
-        return bool(res.found and res.objective is not None and res.objective + work0 > tol)
+        return bool(res.found and res.objective is not None and res.objective + tc.work0 > tol)
 
     # -- membership -----------------------------------------------------------------------------
 

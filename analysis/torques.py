@@ -27,7 +27,7 @@ from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
 from analysis.dafc import DAFCOracle, DirectionTest
 from analysis.exceptions import EmptyTorqueSet, NotInDAFC
-from analysis.friction import FrictionSet, KineticFriction, kinetic_friction
+from analysis.friction import FrictionSet, KineticFriction
 from analysis.linalg import null_space, rank
 from analysis.motion import MotionSpace
 from analysis.solvers.casadi_nlp import RedundancyNLP, solve_realisable_direction, solve_redundancy
@@ -35,6 +35,7 @@ from analysis.solvers.cdd import Generators, polyhedron_generators, reduce_gener
 from analysis.solvers.highs import solve_lp
 from analysis.statics import Statics
 from analysis.stationary import StationaryGrasp
+from analysis.torque_conditions import TorqueConditions, torque_conditions
 
 #: Vertex enumeration of the force polyhedron behind T is attempted up to this dimension; above
 #: it (e.g. several 3-D F-points with 16-sided pyramids: up to k^#F vertices) T is reported by
@@ -182,41 +183,20 @@ def _for_motion(
 ) -> TorqueSet:
     """The set (32) once the motion ``dzeta_c`` is fixed (all conditions linear in ``f_c``)."""
     motion = ms.Phi_full @ zc  # (M + D,)
-    M = system.M
-    kf: KineticFriction | None = None
-    G_eff, T_map = st.G_c, st.J_c.T
-    if sel.s_index:
-        kf = kinetic_friction(system, sel, oracle.slips_of(zc))
-        G_eff = st.G_c + kf.G_w
-        T_map = st.J_c.T + kf.J_w
-    L_c = G_eff.shape[1]
-    a_bar = ms.a_bar
-    Lr = ms.Lambda_r_t
-    w_ex = system.w_ex
-    eq_rows = [st.Xi.T @ G_eff]
-    eq_rhs = [-(st.Xi.T @ w_ex)]
-    if a_bar > 1:
-        N_u = null_space(u[None, :])  # (a_bar, a_bar - 1)
-        eq_rows.append(N_u.T @ Lr.T @ G_eff)
-        eq_rhs.append(-(N_u.T @ Lr.T @ w_ex))
-    A_eq = np.vstack(eq_rows).reshape(-1, L_c)
-    b_eq = np.concatenate(eq_rhs)
-    work_row = u @ Lr.T @ G_eff  # (L_c,)  work = work_row f + u^T Lr^T w_ex
-    work0 = float(u @ Lr.T @ w_ex)
-    A_ub = np.vstack([fs.C, -work_row[None, :]])
-    b_ub = np.concatenate([np.zeros(fs.C.shape[0]), [work0]])
-    f_rec, work = _recommended(fs, A_ub, b_ub, A_eq, b_eq, work_row, work0, w_ex, work_target)
-    dim_P = L_c - (rank(A_eq) if A_eq.size else 0)
+    tc = torque_conditions(system, sel, ms, st, fs, u, oracle.slips_of(zc) if sel.s_index else None)
+    A_ub, b_ub, A_eq, b_eq, T_map = tc.A_ub, tc.b_ub, tc.A_eq, tc.b_eq, tc.T_map
+    f_rec, work = _recommended(fs, tc, system.w_ex, work_target)
+    dim_P = tc.L_c - (rank(A_eq) if A_eq.size else 0)
     gens: Generators | None = None
     if dim_P <= MAX_ENUMERATION_DIM:
         gens = reduce_generators(polyhedron_generators(A_ub, b_ub, A_eq, b_eq).map(T_map))
         if gens.is_empty:
             raise EmptyTorqueSet("the torque set (32) is empty for this direction")
     return TorqueSet(
-        direction=Lr @ u,
+        direction=ms.Lambda_r_t @ u,
         u=u,
         zeta_c=zc,
-        dq=motion[:M],
+        dq=motion[: system.M],
         phi=phi,
         nlp_status=status,
         generators=gens,
@@ -229,14 +209,13 @@ def _for_motion(
         A_eq=A_eq,
         b_eq=b_eq,
         T_map=T_map,
-        W_map=G_eff,
-        friction=kf,
+        W_map=tc.W_map,
+        friction=tc.friction,
     )
 
 
 def _recommended(
-    fs: FrictionSet, A_ub: Array, b_ub: Array, A_eq: Array, b_eq: Array, work_row: Array, work0: float,
-    w_ex: Array, work_target: float | None,
+    fs: FrictionSet, tc: TorqueConditions, w_ex: Array, work_target: float | None,
 ) -> tuple[Array, float]:
     """A member of T well inside the friction set with a definite positive work.
 
@@ -245,11 +224,11 @@ def _recommended(
     ``s`` (distance to every facet and to ``n_f = 0`` of loaded contacts) is maximised with the
     total normal force at most ``2 N1``.
     """
-    L_c = A_ub.shape[1]
+    A_ub, b_ub, A_eq, b_eq, work_row, work0, L_c = tc.A_ub, tc.b_ub, tc.A_eq, tc.b_eq, tc.work_row, tc.work0, tc.L_c
     Nr = fs.N[np.any(fs.N != 0.0, axis=1)]
     n_sum = Nr.sum(axis=0)
     target = 0.5 * (1.0 + float(np.linalg.norm(w_ex))) if work_target is None else work_target
-    best = solve_lp(work_row, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, maximize=True)
+    best = tc.max_work()
     if best.status == "infeasible":
         raise EmptyTorqueSet("the torque set (32) is empty for this direction")
     if best.status == "optimal":
