@@ -12,8 +12,9 @@ from service_helpers import example, free_port, kill_tree, start_server, stop_se
 
 
 @pytest.mark.slow
-def test_jobs_survive_a_killed_server(tmp_path: Path) -> None:
-    env = {"CTP_JOB_LEASE_SECONDS": "2"}
+def test_jobs_survive_a_killed_server(tmp_path: Path, store_url: str) -> None:
+    """On both stores (``store_url``: SQLite, and PostgreSQL when CTP_TEST_POSTGRES_URL is set)."""
+    env = {"CTP_JOB_LEASE_SECONDS": "2", "CTP_DATABASE_URL": store_url}
     port = free_port()
     server = start_server(tmp_path, port, **env)
     base = f"http://127.0.0.1:{port}"
