@@ -5,11 +5,16 @@ hand's kinematics (:mod:`analysis.kinematics`) and the shapes' signed distances
 (:mod:`analysis.geometry`) is checked here, after the model, contact by contact in scene order;
 the first failing check of a contact is reported and the next contact is checked:
 
-* the normal ``n`` has unit length (within ``UNIT_TOL``);
+* the normal ``n`` has unit length (within ``UNIT_TOL``; the model normalised those off by at most
+  ``NORMALISE_TOL``, with a note in ``Scene.notes``);
 * the body names a fixed body or a body ``"<finger>/<k>"`` (``"<finger>/<link>"`` for URDF);
 * the point ``p_C`` lies on the surface of its body (a link's axis inflated by its radius, or a
   fixed body's shape) and on the object's surface, within ``GEOMETRY_TOL``;
-* the normal points into the object (``p_C + 1e-3 n`` is inside it).
+* the normal lies in the normal cones at ``p_C`` (:mod:`analysis.geometry`), within
+  ``NORMAL_CONE_TOL`` (the sine of the angle to the cone): ``-n`` in the object's, ``n`` in the
+  body's. At a smooth point that is the surface normal; at a box vertex or edge, a polygon corner
+  or a cylinder rim, any direction between the faces' normals (a cube's corner on a table takes the
+  table's normal). The cones take every feature within ``GEOMETRY_TOL`` of the point.
 
 A finger that cannot be built (a URDF that does not load) is reported instead of every contact
 check. Errors are :class:`SceneError` whose ``loc`` names the field (``contacts.2.point``) and
@@ -27,20 +32,36 @@ import yaml
 from pydantic import ValidationError
 from pydantic_core import InitErrorDetails
 
+from analysis._types import Array
 from analysis.exceptions import SceneError
-from analysis.geometry import body_surface_distance, object_signed_distance
+from analysis.geometry import (
+    NormalCone,
+    body_normal_cone,
+    body_surface_distance,
+    object_normal_cone,
+    object_signed_distance,
+)
 from analysis.kinematics import HandKinematics
-from analysis.scene import UNIT_TOL, Scene, clean_loc, scene_error_details
+from analysis.scene import NORMALISE_TOL, UNIT_TOL, Scene, clean_loc, scene_error_details
 
 #: Absolute tolerance (scene length units) for "a point lies on a surface".
 GEOMETRY_TOL = 1e-4
+#: Largest distance of a unit contact normal to a normal cone (about the angle, in radians).
+NORMAL_CONE_TOL = 1e-3
 
 __all__ = [
     "GEOMETRY_TOL",
+    "MAX_SCENE_BYTES",
+    "MAX_SCENE_DEPTH",
+    "MAX_YAML_ALIASES",
+    "MAX_YAML_NODES",
+    "NORMAL_CONE_TOL",
     "check_geometry",
     "geometry_errors",
     "load_scene",
+    "parse_scene_data",
     "parse_scene_text",
+    "read_scene_data",
     "scene_from_dict",
 ]
 
@@ -61,7 +82,8 @@ def _contact_errors(scene: Scene) -> list[InitErrorDetails]:
         p = np.asarray(c.point, dtype=float)
         norm = float(np.linalg.norm(n))
         if abs(norm - 1.0) > UNIT_TOL:
-            err(("contacts", i, "normal"), f"must be a unit vector (norm {norm:.6g})", c.normal)
+            err(("contacts", i, "normal"), f"must be a unit vector (norm {norm:.6g}; normals within "
+                f"{NORMALISE_TOL:g} of unit length are normalised)", c.normal)
             continue
         ref = hand.resolve_body(c.body)
         if ref is None:
@@ -77,10 +99,27 @@ def _contact_errors(scene: Scene) -> list[InitErrorDetails]:
         if sd is not None and abs(sd) > GEOMETRY_TOL:
             err(("contacts", i, "point"), f"is {abs(sd):.4g} away from the object's surface", c.point)
             continue
-        inside = object_signed_distance(scene, p + 1e-3 * n)
-        if inside is not None and inside >= 0.0:
-            err(("contacts", i, "normal"), "must point into the object (it points outward)", c.normal)
+        u = n / norm  # unit: outward of the body, into the object
+        cone = object_normal_cone(scene, p, GEOMETRY_TOL)
+        if cone is not None and not cone.contains(-u, NORMAL_CONE_TOL):
+            why = _cone_message(cone, -u, "into the object", "of the object", "outward")
+            err(("contacts", i, "normal"), why, c.normal)
+            continue
+        cone = body_normal_cone(scene, hand, ref, p, GEOMETRY_TOL)
+        if cone is not None and not cone.contains(u, NORMAL_CONE_TOL):
+            why = _cone_message(cone, u, f"out of body '{c.body}'", f"of body '{c.body}'", "into the body")
+            err(("contacts", i, "normal"), why, c.normal)
     return errors
+
+
+def _cone_message(cone: NormalCone, u: Array, into: str, of: str, wrong_way: str) -> str:
+    """Why the outward direction ``u`` ``(d,)`` is not in ``cone``: it points the wrong way (no
+    positive component along any face normal), or by how many degrees it misses the cone."""
+    if cone.generators.shape[0] == 0 or float(np.max(cone.generators @ u)) <= 0.0:
+        return f"must point {into} (it points {wrong_way})"
+    angle = float(np.degrees(np.arcsin(min(cone.distance(u), 1.0))))
+    kind = "surface normal" if cone.generators.shape[0] == 1 else "normal cone"
+    return f"must point {into}: it is {angle:.3g} deg off the {kind} {of} at the point"
 
 
 def _as_errors(e: ValidationError) -> list[dict[str, Any]]:
@@ -123,19 +162,214 @@ def scene_from_dict(data: Any) -> Scene:
     return scene
 
 
-def parse_scene_text(text: str, suffix: str = ".json") -> Scene:
-    try:
-        data = yaml.safe_load(text) if suffix in (".yaml", ".yml") else json.loads(text)
-    except (json.JSONDecodeError, yaml.YAMLError) as e:
-        raise SceneError((), f"cannot parse {suffix.lstrip('.').upper()}: {e}") from None
-    return scene_from_dict(data)
+# --------------------------------------------------------------------------------------------
+# Scene text: the one parser every entry point uses (CLI commands, batch, the service's upload)
+
+#: Largest scene file read (bytes); the service passes its own ``max_body_bytes``.
+MAX_SCENE_BYTES = 10_000_000
+#: Deepest nesting of lists and mappings in a scene file (a scene needs about 6).
+MAX_SCENE_DEPTH = 64
+#: Most YAML aliases (``*name``) in one file: a scene has little to repeat, and each alias
+#: multiplies what is built (an "alias bomb" of 9 levels of 6 aliases is 10 million nodes).
+MAX_YAML_ALIASES = 32
+#: Most nodes of a YAML document once its aliases are counted as copies.
+MAX_YAML_NODES = 200_000
+
+#: Readable names of the YAML values that have no JSON counterpart.
+_NON_JSON = {"date": "a YAML date", "datetime": "a YAML timestamp", "bytes": "YAML !!binary data",
+             "set": "a YAML !!set", "tuple": "a YAML pair (!!omap or !!pairs)"}
 
 
-def load_scene(path: str | Path) -> Scene:
-    """Load a scene from a ``.json``, ``.yaml`` or ``.yml`` file."""
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _number_message(e: Exception) -> str:
+    text = _one_line(str(e))
+    return "a number of more than 4300 digits" if "digits" in text else text
+
+
+def _yaml_message(e: yaml.YAMLError) -> str:
+    """A YAML error on one line: what is wrong and where (line and column, 1-based)."""
+    if isinstance(e, yaml.MarkedYAMLError):
+        mark = e.problem_mark or e.context_mark
+        what = e.problem or e.context or "invalid YAML"
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
+        return _one_line(f"{where}{what}")
+    return _one_line(str(e))
+
+
+class _LimitedLoader(yaml.SafeLoader):
+    """PyYAML's safe loader with the limits above checked while the node graph is composed,
+    before any Python object is built (aliases are shared nodes until then, so the check is
+    cheap whatever they would expand to)."""
+
+    def __init__(self, stream: str):
+        super().__init__(stream)
+        self._depth = 0
+        self._aliases = 0
+
+    def fetch_flow_collection_start(self, TokenClass: Any) -> None:
+        # the scanner looks ahead through every open flow collection ('[' or '{') for each token:
+        # refuse deep flow nesting while scanning, before that look-ahead grows with the depth
+        if self.flow_level >= MAX_SCENE_DEPTH:
+            mark = self.get_mark()
+            raise SceneError((), f"cannot parse YAML: line {mark.line + 1}: nested more than "
+                                 f"{MAX_SCENE_DEPTH} levels deep")
+        super().fetch_flow_collection_start(TokenClass)
+
+    def add_indent(self, column: int) -> bool:
+        if len(self.indents) >= MAX_SCENE_DEPTH:
+            mark = self.get_mark()
+            raise SceneError((), f"cannot parse YAML: line {mark.line + 1}: nested more than "
+                                 f"{MAX_SCENE_DEPTH} levels deep")
+        return bool(super().add_indent(column))
+
+    def compose_node(self, parent: Any, index: Any) -> Any:
+        if self.check_event(yaml.AliasEvent):
+            self._aliases += 1
+            if self._aliases > MAX_YAML_ALIASES:
+                mark = self.peek_event().start_mark
+                raise SceneError((), f"cannot parse YAML: line {mark.line + 1}: more than {MAX_YAML_ALIASES} "
+                                     "aliases (*name); write the values out")
+        self._depth += 1
+        try:
+            if self._depth > MAX_SCENE_DEPTH:
+                mark = self.peek_event().start_mark
+                raise SceneError((), f"cannot parse YAML: line {mark.line + 1}: nested more than "
+                                     f"{MAX_SCENE_DEPTH} levels deep")
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+def _expanded_size(root: yaml.Node) -> int:
+    """Nodes of a composed YAML graph with every alias counted as a copy (iterative, memoised
+    per node: linear in the graph, not in its expansion); SceneError for a recursive alias."""
+    sizes: dict[int, int] = {}
+    stack: list[tuple[yaml.Node, bool]] = [(root, False)]
+    open_: set[int] = set()
+    while stack:
+        node, done = stack.pop()
+        key = id(node)
+        if key in sizes:
+            continue
+        children: list[yaml.Node] = []
+        if isinstance(node, yaml.SequenceNode):
+            children = list(node.value)
+        elif isinstance(node, yaml.MappingNode):
+            children = [n for pair in node.value for n in pair]
+        if done:
+            open_.discard(key)
+            sizes[key] = 1 + sum(sizes[id(c)] for c in children)
+            if sizes[key] > MAX_YAML_NODES:
+                raise SceneError((), f"cannot parse YAML: its aliases expand to more than {MAX_YAML_NODES} values")
+            continue
+        if key in open_:
+            raise SceneError((), "cannot parse YAML: an alias refers to a node that contains it (recursive)")
+        open_.add(key)
+        stack.append((node, True))
+        for c in children:
+            if id(c) in open_:
+                raise SceneError((), "cannot parse YAML: an alias refers to a node that contains it (recursive)")
+            if id(c) not in sizes:
+                stack.append((c, False))
+    return sizes[id(root)]
+
+
+def _check_json_values(data: Any) -> None:
+    """Raise SceneError naming the first value that is not JSON (a YAML date, binary, set, a
+    mapping key that is not a string) or the place nested deeper than ``MAX_SCENE_DEPTH``."""
+    stack: list[tuple[Any, tuple[str | int, ...]]] = [(data, ())]
+    while stack:
+        value, loc = stack.pop()
+        if len(loc) > MAX_SCENE_DEPTH:
+            raise SceneError((), f"nested more than {MAX_SCENE_DEPTH} levels deep")
+        if isinstance(value, dict):
+            for k, v in value.items():
+                if not isinstance(k, str):
+                    raise SceneError(loc, f"mapping key {k!r} is not a string (quote it)")
+                stack.append((v, (*loc, k)))
+        elif isinstance(value, list):
+            stack.extend((v, (*loc, i)) for i, v in enumerate(value))
+        elif value is None or isinstance(value, str | bool | int | float):
+            continue
+        else:
+            kind = _NON_JSON.get(type(value).__name__, f"a {type(value).__name__}")
+            raise SceneError(loc, f"{kind} is not a JSON value (quote it, or write it as a number, string or list)")
+
+
+def parse_scene_data(source: str | bytes, suffix: str = ".json", *, max_bytes: int = MAX_SCENE_BYTES) -> Any:
+    """The parsed content of a scene file (JSON, or YAML for ``.yaml``/``.yml``), JSON types
+    only, without validating it as a scene. Raises :class:`SceneError` (one line) for: more
+    than ``max_bytes``, bytes that are not UTF-8, a syntax error (with line and column),
+    nesting deeper than ``MAX_SCENE_DEPTH``, more than ``MAX_YAML_ALIASES`` aliases or an
+    expansion over ``MAX_YAML_NODES``, a value JSON does not have (a YAML date, ``!!binary``,
+    ``!!set``; ``loc`` names it). Bounded in time and memory by the size of ``source``."""
+    kind = "YAML" if suffix.lower() in (".yaml", ".yml") else "JSON"
+    size = len(source) if isinstance(source, bytes) else len(source.encode("utf-8", "surrogatepass"))
+    if size > max_bytes:
+        raise SceneError((), f"file too large: {size} bytes; the limit is {max_bytes} bytes")
+    if isinstance(source, bytes):
+        try:
+            text = source.decode("utf-8")
+        except UnicodeDecodeError as e:
+            raise SceneError((), f"cannot parse {kind}: not UTF-8 text (byte {e.start})") from None
+    else:
+        text = source
+    if "\x00" in text:
+        raise SceneError((), f"cannot parse {kind}: binary data (a NUL character), not a text file")
+    if kind == "JSON":
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as e:
+            raise SceneError((), f"cannot parse JSON: line {e.lineno}, column {e.colno}: {e.msg}") from None
+        except RecursionError:
+            raise SceneError((), f"cannot parse JSON: nested more than {MAX_SCENE_DEPTH} levels deep") from None
+        except ValueError as e:  # an integer of more than 4300 digits
+            raise SceneError((), f"cannot parse JSON: {_number_message(e)}") from None
+    else:
+        loader = _LimitedLoader(text)
+        try:
+            node = loader.get_single_node()
+            if node is None:
+                data = None
+            else:
+                _expanded_size(node)
+                data = loader.construct_document(node)
+        except SceneError:
+            raise
+        except yaml.YAMLError as e:
+            raise SceneError((), f"cannot parse YAML: {_yaml_message(e)}") from None
+        except (ValueError, OverflowError, TypeError) as e:  # a value the constructor cannot build
+            raise SceneError((), f"cannot parse YAML: {_number_message(e)}") from None
+        except RecursionError:
+            raise SceneError((), f"cannot parse YAML: nested more than {MAX_SCENE_DEPTH} levels deep") from None
+        finally:
+            loader.dispose()
+    _check_json_values(data)
+    return data
+
+
+def parse_scene_text(text: str | bytes, suffix: str = ".json", *, max_bytes: int = MAX_SCENE_BYTES) -> Scene:
+    """A validated scene from the text of a scene file (:func:`parse_scene_data`, then
+    :func:`scene_from_dict`); :class:`SceneError` names the bad field."""
+    return scene_from_dict(parse_scene_data(text, suffix, max_bytes=max_bytes))
+
+
+def read_scene_data(path: str | Path, *, max_bytes: int = MAX_SCENE_BYTES) -> Any:
+    """:func:`parse_scene_data` of a file; SceneError when it cannot be read (no traceback)."""
     path = Path(path)
     try:
-        text = path.read_text()
+        size = path.stat().st_size
+        if size > max_bytes:
+            raise SceneError((), f"file too large: {size} bytes; the limit is {max_bytes} bytes")
+        raw = path.read_bytes()
     except OSError as e:
-        raise SceneError((), f"cannot read {path}: {e.strerror}") from None
-    return parse_scene_text(text, path.suffix.lower())
+        raise SceneError((), f"cannot read {path}: {e.strerror or e}") from None
+    return parse_scene_data(raw, path.suffix.lower(), max_bytes=max_bytes)
+
+
+def load_scene(path: str | Path, *, max_bytes: int = MAX_SCENE_BYTES) -> Scene:
+    """Load a scene from a ``.json``, ``.yaml`` or ``.yml`` file."""
+    return scene_from_dict(read_scene_data(path, max_bytes=max_bytes))

@@ -92,10 +92,19 @@ def resolve_urdf_path(file: str) -> Path:
                 ("urdf", "file"), f"'{file}': the example-robot-data package is not installed"
             )
         path = root / sub
-    else:
-        path = Path(file).expanduser()
-        if not path.is_absolute():
-            path = Path.cwd() / path
+        # the file must stay inside the package's robots folder, symbolic links resolved (no
+        # '..', no link out of it); the message never shows the server's folders
+        try:
+            inside = path.resolve().is_relative_to(root.resolve())
+        except (OSError, RuntimeError):  # a symbolic-link loop
+            inside = False
+        if not inside or not path.is_file():
+            raise SceneError(("urdf", "file"), f"URDF file not found: '{file}' (no such file in "
+                                               "example-robot-data's robots folder)")
+        return path
+    path = Path(file).expanduser()
+    if not path.is_absolute():
+        path = Path.cwd() / path
     if not path.is_file():
         raise SceneError(("urdf", "file"), f"URDF file not found: '{file}' (looked at {path})")
     return path
@@ -113,8 +122,9 @@ def load_urdf_model(path: Path) -> Any:
     """``pin.buildModelFromUrdf(path)`` with caching; parse errors become :class:`SceneError`."""
     try:
         return _load_model(str(path), path.stat().st_mtime_ns)
-    except (RuntimeError, ValueError) as e:
-        raise SceneError(("urdf", "file"), f"cannot read URDF '{path}': {e}") from None
+    except (RuntimeError, ValueError) as e:  # the file's name only: no server folder in the message
+        why = " ".join(str(e).replace(str(path), path.name).replace(str(path.parent), "").split())
+        raise SceneError(("urdf", "file"), f"cannot read URDF '{path.name}': {why}") from None
 
 
 # --------------------------------------------------------------------------------------------

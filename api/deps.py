@@ -3,12 +3,13 @@ checks every scene-taking route makes (:func:`check_scene`)."""
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 from fastapi import Depends, Request
 
 from analysis.loader import check_geometry
 from analysis.scene import Scene
+from api.cache import ResultCache
 from api.errors import ApiError
 from api.jobs import JobRunner
 from api.settings import Settings
@@ -31,6 +32,16 @@ def get_analysis_pool(request: Request) -> ProcessPool:
     return pool
 
 
+def get_light_pool(request: Request) -> ProcessPool:
+    pool: ProcessPool = request.app.state.light_pool
+    return pool
+
+
+def get_cache(request: Request) -> ResultCache:
+    cache: ResultCache = request.app.state.analysis_cache
+    return cache
+
+
 def get_runner(request: Request) -> JobRunner | None:
     runner: JobRunner | None = request.app.state.runner
     return runner
@@ -44,16 +55,57 @@ def get_executor_name(request: Request) -> str:
 SettingsDep = Annotated[Settings, Depends(get_settings)]
 StoreDep = Annotated[JobStore, Depends(get_store)]
 AnalysisPoolDep = Annotated[ProcessPool, Depends(get_analysis_pool)]
+LightPoolDep = Annotated[ProcessPool, Depends(get_light_pool)]
+CacheDep = Annotated[ResultCache, Depends(get_cache)]
 RunnerDep = Annotated[JobRunner | None, Depends(get_runner)]
 ExecutorNameDep = Annotated[str, Depends(get_executor_name)]
 
 
-def check_scene(scene: Scene, settings: Settings) -> None:
+def check_scene(scene: Scene, settings: Settings, *, enumerate_all: bool = False) -> None:
     """A request's scene, after the body's model validated its structure: its geometry (contact
-    points on their bodies and on the object, normals into it: 422 naming the field, as a scene
-    file gets) and its size (413 over ``max_contacts``)."""
+    points on their bodies and on the object, normals in the normal cones: 422 naming the field,
+    as a scene file gets) and, when the request enumerates every combination (``enumerate_all``:
+    ``POST /enumerations``, ``POST /analyses`` without a combination), its size (413 over
+    ``max_contacts``). One combination and plans take any number of contacts."""
+    check_hand_size(scene, settings)
     check_geometry(scene)  # SceneError -> 422 located in "scene"
-    check_scene_size(scene, settings)
+    if enumerate_all:
+        check_scene_size(scene, settings)
+
+
+def raw_joint_count(body: Any) -> int:
+    """The joints of the scene of a parsed, not yet validated request body (``body["scene"]``),
+    counted from its lists alone: each finger's ``links``, ``joints`` or ``q``, at least one."""
+    scene = body.get("scene") if isinstance(body, dict) else None
+    fingers = scene.get("fingers") if isinstance(scene, dict) else None
+    if not isinstance(fingers, list):
+        return 0
+    n = 0
+    for f in fingers:
+        lists = [f.get(k) for k in ("links", "joints", "q")] if isinstance(f, dict) else []
+        n += max([1, *(len(v) for v in lists if isinstance(v, list))])
+    return n
+
+
+def check_raw_hand_size(body: Any, settings: Settings) -> None:
+    """:func:`check_hand_size` on the parsed body, before the model validates it: validating a
+    scene of 20,000 links takes pydantic a few hundred milliseconds in native code that holds
+    the interpreter (no other request is served meanwhile), counting them takes microseconds."""
+    _hand_size_error(raw_joint_count(body), settings)
+
+
+def check_hand_size(scene: Scene, settings: Settings) -> None:
+    """Scenes over ``max_joints`` joints in all: 413 with the limit, before any kinematics (the
+    cost of building and drawing a chain grows with its length)."""
+    _hand_size_error(scene.M, settings)
+
+
+def _hand_size_error(n: int, settings: Settings) -> None:
+    if n > settings.max_joints:
+        raise ApiError(413, f"scene.fingers: {n} joints in all; this server's limit is {settings.max_joints} "
+                            "(max_joints)", limit=settings.max_joints,
+                       errors=[{"loc": ["scene", "fingers"], "msg": f"more than {settings.max_joints} joints",
+                                "type": "too_large"}])
 
 
 def check_scene_size(scene: Scene, settings: Settings) -> None:

@@ -8,8 +8,13 @@
   (too much work for a synchronous call), not a server fault, hence 422 and not 504.
 * 413: too many contacts (``limit`` = ``max_contacts``) or request body too large
   (``limit`` = ``max_body_bytes``).
-* 404: unknown job. 409: result of an unfinished or failed job (``detail``: status, reason).
-* 503: a worker crashed.
+* 404: unknown job. 409: result of an unfinished or failed job (``detail``: status, reason), or
+  ``DELETE`` of a job that already succeeded or failed (nothing changes).
+* 413 also: a scene over ``max_joints`` joints (``limit``). 405: ``Allow`` names every method of
+  the path, as ``OPTIONS`` does (api/http_methods.py).
+* 503: a worker crashed; or the job store is unavailable (unreachable, locked by another
+  process, damaged, disk full): every route that needs it answers JSON 503 with ``Retry-After``
+  and ``"store": "unavailable"`` (``/health`` too), never a 500 and never the driver's text.
 
 A job never turns an error into an HTTP status: it fails, and ``GET /plans/{id}`` says why
 (``error``: "solver time limit: ...", "time limit: ...", "analysis: no stationary grasp ...").
@@ -23,9 +28,11 @@ from typing import Any
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
+from sqlalchemy.exc import SQLAlchemyError
 from starlette.exceptions import HTTPException
 
 from analysis.exceptions import CTPError, SceneError
+from api.store import StoreUnavailable, failure_kind
 from api.workers import TaskError, TaskTimeout
 
 log = logging.getLogger("ctp.api")
@@ -104,7 +111,30 @@ def task_error_response(e: TaskError) -> JSONResponse:
     return JSONResponse(_body(f"internal error: {e.message}"), status_code=500)
 
 
+def store_unavailable_response(exc: StoreUnavailable, retry_after: int, **extra: Any) -> JSONResponse:
+    """The one answer to a store that cannot be used now: 503, ``Retry-After``, JSON naming only
+    the kind of failure (the SQL, the driver's message and the URL stay in the server log)."""
+    detail = f"{exc}; retry in {retry_after} s"
+    body = {**_body(detail, [{"loc": [], "msg": detail, "type": "store_unavailable"}]), "store": "unavailable",
+            **extra}
+    return JSONResponse(body, status_code=503, headers={"Retry-After": str(retry_after)})
+
+
+def _retry_after(request: Request) -> int:
+    return int(getattr(request.app.state.settings, "store_retry_after_seconds", 5))
+
+
 def install(app: FastAPI) -> None:
+    @app.exception_handler(StoreUnavailable)
+    async def _store(request: Request, exc: StoreUnavailable) -> JSONResponse:
+        return store_unavailable_response(exc, _retry_after(request))
+
+    @app.exception_handler(SQLAlchemyError)
+    async def _store_raw(request: Request, exc: SQLAlchemyError) -> JSONResponse:
+        # a database error that bypassed the store's translation: the same answer, nothing leaked
+        log.warning("untranslated store error: %s", type(exc).__name__)
+        return store_unavailable_response(StoreUnavailable(failure_kind(exc)), _retry_after(request))
+
     @app.exception_handler(RequestValidationError)
     async def _validation(_: Request, exc: RequestValidationError) -> JSONResponse:
         return validation_response(_items(exc.errors()))
@@ -127,6 +157,8 @@ def install(app: FastAPI) -> None:
         limit = exc.limit if isinstance(exc, _TooLarge) else None
         if exc.status_code == 400:  # the body could not be read as JSON or multipart: say so as a 422
             detail = f"body: {exc.detail} (send UTF-8 JSON, or multipart/form-data for uploads)"
+            if isinstance(exc.__cause__, RecursionError):
+                detail = "body: the JSON is nested too deeply to parse"
             return JSONResponse(_body(detail, [{"loc": ["body"], "msg": str(exc.detail), "type": "body_unreadable"}]),
                                 status_code=422)
         return JSONResponse(_body(str(exc.detail), limit=limit), status_code=exc.status_code,

@@ -7,6 +7,7 @@ Routes: ``POST /analyses`` (synchronous, in a worker process, time-limited), ``/
 
 from __future__ import annotations
 
+import asyncio
 import logging
 from collections.abc import AsyncIterator
 from contextlib import asynccontextmanager
@@ -19,7 +20,10 @@ from fastapi.responses import FileResponse
 from fastapi.staticfiles import StaticFiles
 
 from api import errors
+from api.cache import RepeatedBodies, ResultCache
+from api.http_methods import AllowedMethods
 from api.jobs import JobRunner
+from api.lanes import HEAVY_NICE
 from api.routes import analyses, enumerations, health, plans, scenes
 from api.schemas import ErrorBody
 from api.settings import Settings, get_settings
@@ -35,32 +39,39 @@ def create_app(settings: Settings | None = None) -> FastAPI:
 
     @asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
-        store = JobStore(settings.database_url)
-        pool = ProcessPool(settings.analysis_workers, "analysis")
+        store = JobStore(settings.database_url, timeout=settings.store_timeout_seconds)
+        # two lanes: tables of every combination on niced workers, light requests on their own
+        # (api/lanes.py); jobs in the background at the same lower priority
+        pool = ProcessPool(settings.analysis_workers, "analysis", nice=HEAVY_NICE)
+        light = ProcessPool(settings.light_workers, "light")
         executor: ProcessPool | RayExecutor
         if settings.ray_address:
             executor = RayExecutor(settings.ray_address, settings.job_workers)
             app.state.executor_name = f"ray ({settings.ray_address})"
         else:
-            executor = ProcessPool(settings.job_workers, "jobs")
+            executor = ProcessPool(settings.job_workers, "jobs", nice=HEAVY_NICE)
             app.state.executor_name = f"processes ({settings.job_workers})"
-        await pool.start()
+        await asyncio.gather(pool.start(), light.start())
         runner = None
         if settings.run_jobs:
             await executor.start()
             runner = JobRunner(store, executor, slots=settings.job_workers, lease=settings.job_lease_seconds,
                                poll=settings.job_poll_seconds, default_time_limit=settings.job_time_limit,
-                               max_attempts=settings.job_max_attempts)
+                               max_attempts=settings.job_max_attempts,
+                               retry_max=settings.store_retry_max_seconds)
             runner.start()
         app.state.store, app.state.analysis_pool, app.state.runner = store, pool, runner
+        app.state.light_pool = light
+        app.state.analysis_cache = ResultCache(settings.analysis_cache_entries)
         try:
             yield
         finally:
-            pool.closing = executor.closing = True
+            pool.closing = executor.closing = light.closing = True
             if runner is not None:
                 await runner.stop()
             await executor.close()
             await pool.close()
+            await light.close()
             store.close()
 
     app = FastAPI(
@@ -74,6 +85,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     for r in (analyses.router, plans.router, enumerations.router, scenes.router, health.router):
         app.include_router(r)
     app.add_middleware(errors.BodySizeLimit, limit=settings.max_body_bytes)
+    app.add_middleware(AllowedMethods)
+    app.add_middleware(RepeatedBodies, path="/analyses", limit=settings.max_body_bytes)  # outermost
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]
 

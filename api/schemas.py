@@ -42,7 +42,8 @@ class AnalysisCreate(_In):
     for the torque set, ``nu`` adds the friction-uncertainty check). Otherwise: every combination."""
 
     scene: Scene
-    combination: Annotated[str, Field(min_length=1, max_length=16, pattern=r"^[FNSDfnsd]+$")] | None = None
+    #: one letter per contact: any number of contacts (the route checks the scene's count)
+    combination: Annotated[str, Field(min_length=1, max_length=1024, pattern=r"^[FNSDfnsd]+$")] | None = None
     direction: Annotated[list[FiniteFloat], Field(min_length=3, max_length=6)] | None = None
     nu: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] | None = None
 
@@ -125,6 +126,7 @@ class Health(BaseModel):
     executor: str
     analysis_workers: int
     job_workers: int
+    store: Literal["ok"] = "ok"
     jobs: dict[str, int]
 
 
@@ -138,3 +140,4 @@ class ErrorBody(BaseModel):
     detail: str
     errors: list[ErrorItem] = []
     limit: float | None = None
+    store: Literal["unavailable"] | None = Field(None, description="503: the job store is unavailable")

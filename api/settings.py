@@ -21,15 +21,24 @@ class Settings(BaseSettings):
     database_url: str = "sqlite:///ctp-jobs.db"
     #: Worker processes for synchronous analyses (``POST /analyses``).
     analysis_workers: Annotated[int, Field(ge=1, le=64)] = 2
+    #: Worker processes reserved for light requests (one combination's analysis, a scene's
+    #: geometry), so that they never wait behind tables of every combination; the
+    #: ``analysis_workers`` run at a lower CPU priority and lend an idle worker to light requests.
+    light_workers: Annotated[int, Field(ge=1, le=64)] = 2
+    #: Joints a request's scene may have in all (its geometry costs grow with the chain length).
+    max_joints: Annotated[int, Field(ge=1, le=10_000)] = 128
+    #: Analyses kept in the content-addressed result cache (0: no cache).
+    analysis_cache_entries: Annotated[int, Field(ge=0, le=100_000)] = 1024
     #: Worker processes for jobs (plans, enumerations) when no Ray address is set.
     job_workers: Annotated[int, Field(ge=1, le=64)] = 1
     #: Run jobs as Ray tasks on this cluster (``auto``, ``ray://host:10001``, ``local``); empty: processes.
     ray_address: str | None = None
     #: Wall-clock limit of one synchronous analysis (seconds); past it the worker is stopped.
     request_time_limit: Annotated[float, Field(gt=0)] = 30.0
-    #: Default and maximum wall-clock limit of one job (seconds).
+    #: Default and maximum wall-clock limit of one job (seconds), a total over all its attempts.
     job_time_limit: Annotated[float, Field(gt=0)] = 600.0
-    #: Contacts a request's scene may have (the enumeration is 3**L combinations).
+    #: Contacts a scene may have for an enumeration of every combination (3**L of them); one
+    #: combination and plans take any number.
     max_contacts: Annotated[int, Field(ge=1, le=16)] = 12
     #: Largest request body accepted (bytes).
     max_body_bytes: Annotated[int, Field(ge=1024)] = 1_000_000
@@ -40,6 +49,14 @@ class Settings(BaseSettings):
     job_poll_seconds: Annotated[float, Field(gt=0)] = 0.5
     #: How many times a job interrupted by a crash or restart is retried before it fails.
     job_max_attempts: Annotated[int, Field(ge=1)] = 3
+    #: How long one store statement waits for a lock (SQLite's busy timeout, PostgreSQL's
+    #: lock_timeout) or a new PostgreSQL connection waits, before the request answers 503.
+    store_timeout_seconds: Annotated[float, Field(gt=0, le=300)] = 5.0
+    #: ``Retry-After`` of a 503 while the store is unavailable (seconds).
+    store_retry_after_seconds: Annotated[int, Field(ge=1, le=3600)] = 5
+    #: Longest pause between the job runner's retries of a store write (heartbeat, progress, a
+    #: job's final state) while the store is unavailable; the pauses double up to it from 0.2 s.
+    store_retry_max_seconds: Annotated[float, Field(gt=0, le=300)] = 5.0
     #: Scenes listed by ``GET /scenes/examples``.
     examples_dir: Path = PROJECT_DIR / "examples"
     #: Start the job runner with the app (tests of the API alone may turn it off).

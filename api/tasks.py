@@ -20,6 +20,7 @@ from analysis.contacts import build_system
 from analysis.dafc import SEMANTICS
 from analysis.enumerate import enumerate_combinations
 from analysis.loader import scene_from_dict
+from analysis.scene import check_enumerable
 
 Progress = Callable[[float, str], None]
 
@@ -50,6 +51,7 @@ def run_enumeration(payload: dict[str, Any], progress: Progress | None = None) -
     """Every combination's summary (feasible, DAFC dimension, an example direction)."""
     t0 = time.perf_counter()
     scene, system = _system(payload)
+    check_enumerable(scene)  # 3**L combinations: the contact cap of full enumeration
 
     def on_step(k: int, n: int) -> None:
         if progress is not None and n:
@@ -77,10 +79,50 @@ def run_plan(payload: dict[str, Any], progress: Progress | None = None) -> dict[
     return out
 
 
+def run_geometry(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
+    """``POST /scenes/geometry``: world coordinates to draw (each finger's links for the scene's
+    ``q`` or for each of ``configurations``, fixed bodies, object, contacts with their friction
+    cone's half angle). In a worker, so its cost (the chain length times the configurations) is
+    under the request's time limit."""
+    from analysis.kinematics import HandKinematics
+
+    scene = scene_from_dict(payload["scene"])
+    hand = HandKinematics.from_scene(scene)
+    confs = payload.get("configurations")
+    if confs is None:
+        confs = [list(map(float, hand.q0))]
+    frames = []
+    for k, q in enumerate(confs):
+        if progress is not None and k % 50 == 0:
+            progress(k / len(confs), f"{k} of {len(confs)} configurations")
+        qa = np.asarray(q, dtype=float)
+        fingers = []
+        for i, f in enumerate(scene.fingers):
+            links = []
+            for name in hand.fingers[i].body_names():
+                ref = hand.resolve_body(name)
+                assert ref is not None
+                a, b = hand.fingers[i].body_segment(ref.link, qa[hand.finger_slice(i)])
+                links.append({"body": name, "a": _rounded(a[: scene.dim]), "b": _rounded(b[: scene.dim]),
+                              "radius": hand.body_radius(ref)})
+            fingers.append({"name": f.name, "links": links})
+        frames.append({"q": _rounded(qa), "fingers": fingers})
+    contacts = [{"index": i, "body": c.body, "point": c.point, "normal": c.normal, "mu": c.mu,
+                 "half_angle": float(np.arctan(c.mu))} for i, c in enumerate(scene.contacts)]
+    return {"dim": scene.dim, "joints": hand.M, "object": scene.object.model_dump(mode="json"),
+            "fixed_bodies": [b.model_dump(mode="json") for b in scene.fixed_bodies],
+            "contacts": contacts, "frames": frames}
+
+
+def _rounded(a: Any) -> list[float]:
+    return [round(float(x), 9) for x in np.asarray(a).ravel()]
+
+
 TASKS: dict[str, Callable[[dict[str, Any], Progress | None], dict[str, Any]]] = {
     "analysis": run_analysis,
     "enumeration": run_enumeration,
     "plan": run_plan,
+    "geometry": run_geometry,
 }
 
 

@@ -4,7 +4,9 @@ Each local worker is a process that imports the analysis once and then runs task
 pipe, sending back progress messages and one final ``ok``/``error`` message. A task that
 overruns its time limit, or is cancelled, gets its process terminated and replaced: a runaway
 solve cannot hold the server. The event loop watches the pipes with ``add_reader`` (no thread
-per waiting request).
+per waiting request). A worker dies with its server, even one killed with SIGKILL
+(:func:`die_with_parent`), so no orphan keeps computing; a pool may run its workers at a lower
+CPU priority (``nice``, api/lanes.py).
 """
 
 from __future__ import annotations
@@ -15,6 +17,8 @@ import logging
 import multiprocessing as mp
 import os
 import signal
+import sys
+import threading
 import time
 import traceback
 from collections.abc import Callable
@@ -72,8 +76,41 @@ def classify(e: BaseException) -> tuple[str, str, list[Any] | None, list[dict[st
 # -- the worker process ---------------------------------------------------------------------------
 
 
-def _worker_main(conn: Connection) -> None:  # pragma: no cover - runs in the child process
+#: How often a worker's watchdog checks that its server is still alive (seconds).
+WATCHDOG_SECONDS = 0.5
+
+
+def die_with_parent(parent_pid: int) -> None:  # pragma: no cover - runs in the child process
+    """End this process when the server that started it dies, even by SIGKILL (no orphan keeps
+    computing): the kernel's parent-death signal (Linux ``prctl(PR_SET_PDEATHSIG, SIGKILL)``),
+    and a watchdog thread that polls ``os.getppid()`` where there is no prctl or in case the
+    process was reparented before the signal was armed."""
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(Exception):
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+    if os.getppid() != parent_pid:  # the server died before the signal was armed
+        os._exit(1)
+
+    def watch() -> None:
+        while True:
+            time.sleep(WATCHDOG_SECONDS)
+            if os.getppid() != parent_pid:
+                os._exit(1)
+
+    threading.Thread(target=watch, name="ctp-parent-watchdog", daemon=True).start()
+
+
+def _worker_main(conn: Connection, parent_pid: int | None = None,
+                 nice: int = 0) -> None:  # pragma: no cover - runs in the child process
+    if parent_pid is not None:
+        die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the server, which stops us
+    if nice:
+        with contextlib.suppress(OSError):
+            os.nice(nice)  # a background lane: the light requests' workers get the CPU first
     from api.tasks import run_task  # loads the analysis before the worker says it is ready
 
     conn.send(("ready",))
@@ -113,10 +150,11 @@ class _Throttled:
 
 
 class _Worker:
-    def __init__(self, ctx: Any):
+    def __init__(self, ctx: Any, nice: int = 0):
         parent, child = ctx.Pipe(duplex=True)
         self.conn: Connection = parent
-        self.proc = ctx.Process(target=_worker_main, args=(child,), daemon=True, name="ctp-worker")
+        self.proc = ctx.Process(target=_worker_main, args=(child, os.getpid(), nice), daemon=True,
+                                name="ctp-worker")
         self.proc.start()
         child.close()
         self.ready = False
@@ -143,11 +181,15 @@ def _await_ready(w: _Worker, limit: float = 120.0) -> None:
 
 
 class ProcessPool:
-    """``size`` worker processes; ``await run(...)`` takes an idle one (waits for one if none)."""
+    """``size`` worker processes; ``await run(...)`` takes an idle one (waits for one if none).
 
-    def __init__(self, size: int, name: str = "workers"):
+    ``nice`` lowers the workers' CPU priority (a lane for heavy or background work, so that the
+    workers of light requests get the CPU first when both run)."""
+
+    def __init__(self, size: int, name: str = "workers", nice: int = 0):
         self.size = size
         self.name = name
+        self.nice = nice
         self._ctx = mp.get_context("spawn")  # never fork a process that runs an event loop and threads
         self._idle: asyncio.Queue[_Worker] | None = None
         self._all: set[_Worker] = set()
@@ -165,7 +207,7 @@ class ProcessPool:
         self.started = True
 
     def _spawn(self) -> _Worker:
-        w = _Worker(self._ctx)
+        w = _Worker(self._ctx, self.nice)
         self._all.add(w)
         return w
 
@@ -181,6 +223,16 @@ class ProcessPool:
     def idle(self) -> int:
         return 0 if self._idle is None else self._idle.qsize()
 
+    def pids(self) -> list[int]:
+        """The worker processes' ids (fault-injection tests, diagnostics)."""
+        return [w.proc.pid for w in self._all if w.proc.pid is not None]
+
+    def take_idle(self) -> _Worker | None:
+        """An idle worker now, or None (never waits): for :meth:`run` ``worker=``."""
+        if self._idle is None or self._idle.empty():
+            return None
+        return self._idle.get_nowait()
+
     async def _replace(self, w: _Worker) -> None:
         self._all.discard(w)
         await asyncio.to_thread(w.stop, True)
@@ -191,15 +243,19 @@ class ProcessPool:
 
     async def run(self, kind: str, payload: dict[str, Any], *, timeout: float,
                   on_progress: ProgressCallback | None = None,
-                  cancelled: asyncio.Event | None = None) -> dict[str, Any]:
+                  cancelled: asyncio.Event | None = None, worker: _Worker | None = None) -> dict[str, Any]:
         """Run a task; TaskTimeout after ``timeout`` s of work (the wait for a free worker counts
-        too, so a request never outlives its limit), TaskCancelled when ``cancelled`` is set."""
+        too, so a request never outlives its limit), TaskCancelled when ``cancelled`` is set.
+        ``worker``: one taken with :meth:`take_idle` (it goes back to this pool afterwards)."""
         assert self._idle is not None, "pool not started"
         deadline = time.monotonic() + timeout
-        try:
-            w = await asyncio.wait_for(self._idle.get(), timeout=timeout)
-        except TimeoutError:
-            raise TaskTimeout(timeout) from None
+        if worker is not None:
+            w = worker
+        else:
+            try:
+                w = await asyncio.wait_for(self._idle.get(), timeout=timeout)
+            except TimeoutError:
+                raise TaskTimeout(timeout) from None
         healthy = False  # a timeout, a cancellation or a dead worker: the process is replaced
         try:
             result = await self._talk(w, kind, payload, deadline, timeout, on_progress, cancelled)

@@ -13,6 +13,10 @@ from api.store import Job, JobStore
 ERRORS: dict[int | str, dict[str, Any]] = {
     404: {"description": "no such job"},
 }
+CANCEL_ERRORS: dict[int | str, dict[str, Any]] = {
+    **ERRORS,
+    409: {"description": "the job has already succeeded or failed: nothing to cancel, nothing changed"},
+}
 
 
 def public(job: Job, prefix: str) -> dict[str, Any]:
@@ -55,8 +59,11 @@ def result(store: JobStore, kind: str, job_id: str, what: str) -> dict[str, Any]
 
 def cancel(store: JobStore, runner: JobRunner | None, kind: str, job_id: str, what: str) -> Job:
     job = get(store, kind, job_id, what)
-    if job.status in ("succeeded", "failed", "cancelled"):
-        return job
+    if job.status == "cancelled":
+        return job  # cancelling again changes nothing and says so with the job
+    if job.status in ("succeeded", "failed"):  # nothing to cancel: 409, the job unchanged
+        raise ApiError(409, f"{what} '{job_id}' has already {job.status}: a finished {what} cannot be cancelled",
+                       errors=[{"loc": [], "msg": f"already {job.status}", "type": "conflict"}])
     out = store.cancel(job_id)
     if runner is not None:
         runner.wake()
@@ -72,4 +79,4 @@ def time_limit(requested: float | None, maximum: float) -> float:
     return requested if requested is not None else maximum
 
 
-__all__ = ["ERRORS", "JobPublic", "cancel", "get", "public", "result", "submit", "time_limit"]
+__all__ = ["CANCEL_ERRORS", "ERRORS", "JobPublic", "cancel", "get", "public", "result", "submit", "time_limit"]

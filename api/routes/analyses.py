@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
-from typing import Any
+import asyncio
+from typing import Annotated, Any
 
-from fastapi import APIRouter
+from fastapi import APIRouter, Request
+from fastapi.responses import Response
+from pydantic import SkipValidation
 
-from api.deps import AnalysisPoolDep, SettingsDep, check_scene
+from api.bodies import validated
+from api.cache import BODY_SHA256, answer, cache_key
+from api.deps import AnalysisPoolDep, CacheDep, LightPoolDep, SettingsDep, check_raw_hand_size, check_scene
 from api.errors import ApiError
+from api.lanes import analysis_lane, run_in_lane
 from api.schemas import AnalysisCreate, AnalysisPublic, ErrorBody
 
 router = APIRouter(tags=["analyses"])
@@ -21,13 +27,19 @@ _ERRORS: dict[int | str, dict[str, Any]] = {
 
 
 @router.post("/analyses", response_model=AnalysisPublic, responses=_ERRORS)
-async def create_analysis(body: AnalysisCreate, settings: SettingsDep, pool: AnalysisPoolDep) -> dict[str, Any]:
+async def create_analysis(raw: Annotated[AnalysisCreate, SkipValidation], request: Request, settings: SettingsDep,
+                          pool: AnalysisPoolDep, light: LightPoolDep, cache: CacheDep) -> Any:
     """The full report of ``combination``, or (without it) the table of every combination.
 
     Runs in a worker process; past ``request_time_limit`` seconds the worker is stopped and the
-    answer is 422 with ``limit`` (large enumerations belong in ``POST /enumerations``)."""
+    answer is 422 with ``limit`` (large enumerations belong in ``POST /enumerations``). One
+    combination runs on the light workers, a table on the others (api/lanes.py: ``X-Lane``), so a
+    light request does not wait behind tables. A request that repeats an earlier one (the same scene
+    and parameters) is answered from the content-addressed cache (header ``X-Cache: hit``), one
+    identical to a request still running waits for its answer (``X-Cache: shared``)."""
+    check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
+    body = await validated(AnalysisCreate, raw)  # off the event loop (api/bodies.py)
     scene = body.scene
-    check_scene(scene, settings)
     if body.combination is not None and len(body.combination) != len(scene.contacts):
         raise ApiError(422, f"combination: '{body.combination}' has {len(body.combination)} letters; the scene "
                             f"has {len(scene.contacts)} contacts",
@@ -46,4 +58,20 @@ async def create_analysis(body: AnalysisCreate, settings: SettingsDep, pool: Ana
                        errors=[{"loc": ["nu"], "msg": "needs combination", "type": "value_error"}])
     payload = {"scene": scene.model_dump(mode="json"), "combination": body.combination,
                "direction": body.direction, "nu": body.nu}
-    return await pool.run("analysis", payload, timeout=settings.request_time_limit)
+    key = cache_key("analysis", payload)
+    lane = analysis_lane(body.combination, len(scene.contacts), scene.M)
+
+    async def compute() -> bytes:
+        # the geometric checks build the hand's kinematics: off the event loop
+        await asyncio.to_thread(check_scene, scene, settings, enumerate_all=body.combination is None)
+        result = await run_in_lane(lane, light, pool, "analysis", payload, timeout=settings.request_time_limit)
+        return AnalysisPublic.model_validate(result).model_dump_json().encode()
+
+    # a request that passed every check and succeeded before is answered from the cache; one that
+    # repeats a request being computed now waits for that one
+    content, how = await answer(cache, key, compute)
+    body_sha256 = request.scope.get(BODY_SHA256)
+    if body_sha256:  # the same bytes again: answered before routing (api.cache.RepeatedBodies)
+        cache.remember_body(body_sha256, key)
+    headers = {"X-Cache": how, **({"X-Lane": lane} if how == "miss" else {})}
+    return Response(content, media_type="application/json", headers=headers)

@@ -6,8 +6,10 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Response
+from pydantic import SkipValidation
 
-from api.deps import RunnerDep, SettingsDep, StoreDep, check_scene
+from api.bodies import validate_body
+from api.deps import RunnerDep, SettingsDep, StoreDep, check_raw_hand_size, check_scene
 from api.routes import _jobs
 from api.schemas import AnalysisPublic, EnumerationCreate, EnumerationPublic, ErrorBody, JobList, JobStatus
 
@@ -17,10 +19,12 @@ KIND, WHAT = "enumeration", "enumeration"
 
 @router.post("", status_code=202, response_model=EnumerationPublic,
              responses={413: {"model": ErrorBody}, 422: {"model": ErrorBody}})
-def create_enumeration(body: EnumerationCreate, settings: SettingsDep, store: StoreDep, runner: RunnerDep,
-                       response: Response) -> dict[str, Any]:
+def create_enumeration(raw: Annotated[EnumerationCreate, SkipValidation], settings: SettingsDep, store: StoreDep,
+                       runner: RunnerDep, response: Response) -> dict[str, Any]:
     """Queue the enumeration of every combination; 202 with the job."""
-    check_scene(body.scene, settings)
+    check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
+    body = validate_body(EnumerationCreate, raw)  # in the thread this route runs in (api/bodies.py)
+    check_scene(body.scene, settings, enumerate_all=True)
     limit = _jobs.time_limit(body.time_limit, settings.job_time_limit)
     job = _jobs.submit(store, runner, KIND, {"scene": body.scene.model_dump(mode="json"), "time_limit": limit})
     response.headers["Location"] = f"/enumerations/{job.id}"
@@ -46,6 +50,6 @@ def get_enumeration_result(job_id: str, store: StoreDep) -> dict[str, Any]:
     return _jobs.result(store, KIND, job_id, WHAT)
 
 
-@router.delete("/{job_id}", response_model=EnumerationPublic, responses=_jobs.ERRORS)
+@router.delete("/{job_id}", response_model=EnumerationPublic, responses=_jobs.CANCEL_ERRORS)
 def cancel_enumeration(job_id: str, store: StoreDep, runner: RunnerDep) -> dict[str, Any]:
     return _jobs.public(_jobs.cancel(store, runner, KIND, job_id, WHAT), "/enumerations")

@@ -5,8 +5,11 @@ from __future__ import annotations
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Query, Response
+from pydantic import SkipValidation
 
-from api.deps import RunnerDep, SettingsDep, StoreDep, check_scene
+from analysis.scene import MAX_MAGNITUDE
+from api.bodies import validate_body
+from api.deps import RunnerDep, SettingsDep, StoreDep, check_raw_hand_size, check_scene
 from api.errors import ApiError
 from api.routes import _jobs
 from api.schemas import ErrorBody, JobList, JobStatus, PlanCreate, PlanPublic
@@ -17,9 +20,11 @@ KIND, WHAT = "plan", "plan"
 
 @router.post("", status_code=202, response_model=PlanPublic,
              responses={413: {"model": ErrorBody}, 422: {"model": ErrorBody}})
-def create_plan(body: PlanCreate, settings: SettingsDep, store: StoreDep, runner: RunnerDep,
-                response: Response) -> dict[str, Any]:
+def create_plan(raw: Annotated[PlanCreate, SkipValidation], settings: SettingsDep, store: StoreDep,
+                runner: RunnerDep, response: Response) -> dict[str, Any]:
     """Queue a plan from the scene's grasp to ``goal``; 202 with the job (``url`` to poll)."""
+    check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
+    body = validate_body(PlanCreate, raw)  # in the thread this route runs in (api/bodies.py)
     check_scene(body.scene, settings)
     if body.goal.combination is not None and len(body.goal.combination) != len(body.scene.contacts):
         raise ApiError(422, f"goal.combination: '{body.goal.combination}' has {len(body.goal.combination)} "
@@ -30,6 +35,7 @@ def create_plan(body: PlanCreate, settings: SettingsDep, store: StoreDep, runner
         raise ApiError(422, f"goal.pose: has {len(body.goal.pose)} values; a {body.scene.dim}-D object needs "
                             f"{body.scene.D}",
                        errors=[{"loc": ["goal", "pose"], "msg": f"needs {body.scene.D} values", "type": "value_error"}])
+    _check_wrenches(body.goal.wrenches, body.scene.D, body.scene.dim)
     limit = _jobs.time_limit(body.time_limit, settings.job_time_limit)
     request = {"scene": body.scene.model_dump(mode="json"), "goal": body.goal.model_dump(mode="json"),
                "time_limit": limit}
@@ -60,7 +66,24 @@ def get_plan_result(plan_id: str, store: StoreDep) -> dict[str, Any]:
     return _jobs.result(store, KIND, plan_id, WHAT)
 
 
-@router.delete("/{plan_id}", response_model=PlanPublic, responses=_jobs.ERRORS)
+@router.delete("/{plan_id}", response_model=PlanPublic, responses=_jobs.CANCEL_ERRORS)
 def cancel_plan(plan_id: str, store: StoreDep, runner: RunnerDep) -> dict[str, Any]:
-    """Cancel: a queued plan at once, a running one as soon as its worker is stopped."""
+    """Cancel: a queued plan at once, a running one as soon as its worker is stopped; a plan that
+    already succeeded or failed: 409, nothing changed."""
     return _jobs.public(_jobs.cancel(store, runner, KIND, plan_id, WHAT), "/plans")
+
+
+def _check_wrenches(wrenches: list[list[float]] | None, D: int, dim: int) -> None:
+    """``goal.wrenches``: each a wrench of ``D`` components (force and moment) of bounded size,
+    refused at submission (422 naming the entry) rather than failing the job later."""
+    for k, w in enumerate(wrenches or []):
+        loc: list[str | int] = ["goal", "wrenches", k]
+        if len(w) != D:
+            raise ApiError(422, f"goal.wrenches.{k}: has {len(w)} components; a {dim}-D object's wrench has {D} "
+                                "(force and moment)",
+                           errors=[{"loc": loc, "msg": f"needs {D} components", "type": "value_error"}])
+        big = next((j for j, v in enumerate(w) if abs(v) > MAX_MAGNITUDE), None)
+        if big is not None:
+            raise ApiError(422, f"goal.wrenches.{k}.{big}: {w[big]:g} is larger than {MAX_MAGNITUDE:g} in "
+                                "magnitude", errors=[{"loc": [*loc, big], "msg": f"at most {MAX_MAGNITUDE:g}",
+                                                     "type": "too_large"}])

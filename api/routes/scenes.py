@@ -2,17 +2,19 @@
 
 from __future__ import annotations
 
-import json
+import asyncio
 from typing import Annotated, Any
 
-import numpy as np
-from fastapi import APIRouter, File, UploadFile
+from fastapi import APIRouter, File, Response, UploadFile
+from pydantic import SkipValidation, ValidationError
 
-from analysis.kinematics import HandKinematics
-from analysis.loader import check_geometry, parse_scene_text
+from analysis.exceptions import SceneError
+from analysis.loader import check_geometry, parse_scene_data, read_scene_data, scene_from_dict
 from analysis.scene import Scene
-from api.deps import SettingsDep
+from api.bodies import validated
+from api.deps import AnalysisPoolDep, LightPoolDep, SettingsDep, check_hand_size, check_raw_hand_size
 from api.errors import ApiError
+from api.lanes import geometry_lane, run_in_lane
 from api.schemas import ErrorBody, ExampleScene, GeometryCreate, _check_files
 
 router = APIRouter(prefix="/scenes", tags=["scenes"])
@@ -24,8 +26,8 @@ def list_examples(settings: SettingsDep) -> list[dict[str, Any]]:
     out = []
     for path in sorted(settings.examples_dir.glob("*.json")):
         try:
-            data = json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError):
+            data = read_scene_data(path)  # the scene files' one parser
+        except SceneError:
             continue
         if not isinstance(data, dict) or "contacts" not in data:
             continue
@@ -39,64 +41,64 @@ def list_examples(settings: SettingsDep) -> list[dict[str, Any]]:
                                                                   422: {"model": ErrorBody}})
 async def upload_scene(file: Annotated[UploadFile, File(description="a scene, .json or .yaml")],
                        settings: SettingsDep) -> dict[str, Any]:
-    """Validate an uploaded scene file and return it as JSON (422 names the bad field)."""
+    """Validate an uploaded scene file and return it as JSON (422 names the bad field).
+
+    The file goes through the scene files' one parser (:func:`analysis.loader.parse_scene_data`:
+    size, nesting depth, YAML aliases and JSON-only values checked before anything is built),
+    then the model and the geometric checks, all off the event loop."""
     raw = await file.read(settings.max_body_bytes + 1)
     if len(raw) > settings.max_body_bytes:
         raise ApiError(413, f"file too large: the limit is {settings.max_body_bytes} bytes",
                        limit=settings.max_body_bytes)
-    try:
-        text = raw.decode("utf-8")
-    except UnicodeDecodeError:
-        raise ApiError(422, "file: not UTF-8 text") from None
     name = (file.filename or "scene.json").lower()
     suffix = ".yaml" if name.endswith((".yaml", ".yml")) else ".json"
-    import yaml
+    scene = await asyncio.to_thread(_validate_upload, raw, suffix, settings.max_body_bytes, settings)
+    return scene.model_dump(mode="json")
 
+
+def _validate_upload(raw: bytes, suffix: str, max_bytes: int, settings: Any) -> Scene:
     try:
-        data = yaml.safe_load(text) if suffix == ".yaml" else json.loads(text)
-    except (json.JSONDecodeError, yaml.YAMLError) as e:
-        raise ApiError(422, f"file: cannot parse {suffix[1:].upper()}: {e}") from None
+        data = parse_scene_data(raw, suffix, max_bytes=max_bytes)
+    except SceneError as e:
+        where = ".".join(str(p) for p in e.loc)
+        raise ApiError(422, f"{'scene.' + where if where else 'file'}: {e.reason}",
+                       errors=[{"loc": ["scene", *e.loc] if e.loc else ["file"], "msg": e.reason,
+                                "type": "scene_file"}]) from None
     try:
         _check_files(data)
     except ValueError as e:
         raise ApiError(422, f"scene.{e}") from None
-    scene = parse_scene_text(json.dumps(data), ".json")  # SceneError -> 422 naming the field
-    return scene.model_dump(mode="json")
-
-
-@router.post("/geometry", responses={422: {"model": ErrorBody}})
-def scene_geometry(body: GeometryCreate) -> dict[str, Any]:
-    """World coordinates to draw: each finger's links (segments and radii) for the scene's ``q``
-    or for each of ``configurations``, fixed bodies, object, contacts (with friction-cone half angle)."""
-    scene: Scene = body.scene
+    try:
+        scene = Scene.model_validate(data)
+    except ValidationError:
+        scene_from_dict(data)  # raises the SceneError naming the first bad field (422)
+        raise
+    check_hand_size(scene, settings)  # the joint count before any kinematics (413 naming the limit)
     check_geometry(scene)  # SceneError -> 422 naming the field
-    hand = HandKinematics.from_scene(scene)
-    confs = body.configurations if body.configurations is not None else [list(map(float, hand.q0))]
-    for k, q in enumerate(confs):
-        if len(q) != hand.M:
-            raise ApiError(422, f"configurations.{k}: has {len(q)} values; the hand has {hand.M} joints",
-                           errors=[{"loc": ["configurations", k], "msg": f"needs {hand.M} values",
+    return scene
+
+
+@router.post("/geometry", responses={413: {"model": ErrorBody}, 422: {"model": ErrorBody}})
+async def scene_geometry(raw: Annotated[GeometryCreate, SkipValidation], settings: SettingsDep,
+                         light: LightPoolDep, pool: AnalysisPoolDep, response: Response) -> dict[str, Any]:
+    """World coordinates to draw: each finger's links (segments and radii) for the scene's ``q``
+    or for each of ``configurations``, fixed bodies, object, contacts (with friction-cone half angle).
+
+    Computed in a worker under ``request_time_limit`` (422 with ``limit`` past it): a light one for
+    a few configurations, else a heavy one (api/lanes.py, ``X-Lane``); scenes over ``max_joints``
+    joints get 413."""
+    check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
+    body = await validated(GeometryCreate, raw)  # off the event loop (api/bodies.py)
+    scene: Scene = body.scene
+    check_hand_size(scene, settings)
+    M = scene.M
+    for k, q in enumerate(body.configurations or []):
+        if len(q) != M:
+            raise ApiError(422, f"configurations.{k}: has {len(q)} values; the hand has {M} joints",
+                           errors=[{"loc": ["configurations", k], "msg": f"needs {M} values",
                                     "type": "value_error"}])
-    frames = []
-    for q in confs:
-        qa = np.asarray(q, dtype=float)
-        fingers = []
-        for i, f in enumerate(scene.fingers):
-            links = []
-            for name in hand.fingers[i].body_names():
-                ref = hand.resolve_body(name)
-                assert ref is not None
-                a, b = hand.fingers[i].body_segment(ref.link, qa[hand.finger_slice(i)])
-                links.append({"body": name, "a": _r(a[: scene.dim]), "b": _r(b[: scene.dim]),
-                              "radius": hand.body_radius(ref)})
-            fingers.append({"name": f.name, "links": links})
-        frames.append({"q": _r(qa), "fingers": fingers})
-    contacts = [{"index": i, "body": c.body, "point": c.point, "normal": c.normal, "mu": c.mu,
-                 "half_angle": float(np.arctan(c.mu))} for i, c in enumerate(scene.contacts)]
-    return {"dim": scene.dim, "joints": hand.M, "object": scene.object.model_dump(mode="json"),
-            "fixed_bodies": [b.model_dump(mode="json") for b in scene.fixed_bodies],
-            "contacts": contacts, "frames": frames}
+    payload = {"scene": scene.model_dump(mode="json"), "configurations": body.configurations}
+    lane = geometry_lane(len(body.configurations or [None]), [len(f.q) for f in scene.fingers])
+    response.headers["X-Lane"] = lane
+    return await run_in_lane(lane, light, pool, "geometry", payload, timeout=settings.request_time_limit)
 
-
-def _r(a: Any) -> list[float]:
-    return [round(float(x), 9) for x in np.asarray(a).ravel()]

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from cube_planes import cube_in_planes
 from fastapi.testclient import TestClient
 from service_helpers import example, settings_for, wait_for
 
@@ -167,6 +168,19 @@ def test_too_many_contacts_is_413_with_the_limit(client: TestClient) -> None:
     assert r.status_code == 413
 
 
+def test_the_contact_limit_is_for_enumerations_only(client: TestClient) -> None:
+    # a cube in a corner of five planes: 20 contacts, over this server's max_contacts (6)
+    cube = cube_in_planes(5)
+    letters = "F" * 4 + "D" * 16  # on the floor only: the floor carries the weight, nothing moves
+    r = client.post("/analyses", json={"scene": cube, "combination": letters})
+    assert r.status_code == 200, r.text
+    report = r.json()["report"]
+    assert report["combination"] == letters and report["motion_space"]["a_bar"] == 0
+    assert report["stationary"] is not None and not report["feasible"]
+    assert client.post("/analyses", json={"scene": cube}).status_code == 413
+    assert client.post("/enumerations", json={"scene": cube}).status_code == 413
+
+
 def test_body_too_large_is_413(client: TestClient) -> None:
     big = {"scene": {**PLANAR, "description": "x" * 300_000}}
     r = client.post("/analyses", json=big)
@@ -248,8 +262,11 @@ def test_enumeration_job_life_cycle(client: TestClient) -> None:
     assert job["id"] in [j["id"] for j in listed["items"]]
     only_ok = client.get("/enumerations", params={"status": "succeeded"}).json()["items"]
     assert all(j["status"] == "succeeded" for j in only_ok)
-    # a finished job cannot be cancelled any more: DELETE returns it unchanged
-    assert client.delete(job["url"]).json()["status"] == "succeeded"
+    # a finished job cannot be cancelled any more: DELETE answers 409 and changes nothing
+    r = client.delete(job["url"])
+    assert r.status_code == 409 and "already succeeded" in r.json()["detail"], r.text
+    assert client.get(job["url"]).json()["status"] == "succeeded"
+    assert client.get(done["result_url"]).status_code == 200
 
 
 def test_unknown_jobs_are_404(client: TestClient) -> None:

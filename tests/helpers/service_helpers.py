@@ -34,6 +34,7 @@ def wait_for(client: TestClient, url: str, statuses: tuple[str, ...] = ("succeed
 
 def settings_for(tmp: Path, **kw: Any) -> Settings:
     base: dict[str, Any] = {"database_url": f"sqlite:///{tmp / 'jobs.db'}", "analysis_workers": 1, "job_workers": 1,
+                            "light_workers": 1,
                             "job_poll_seconds": 0.1, "max_contacts": 6, "max_body_bytes": 200_000,
                             "request_time_limit": 30.0}
     base.update(kw)
