@@ -1,6 +1,18 @@
-"""Signed distances to the scene's shapes (validation of contact points, collision checks)."""
+"""Signed distances to the scene's shapes (validation of contact points, collision checks) and
+their normal cones (validation of contact normals at faces, edges and vertices).
+
+The normal cone of a convex body ``K`` at a boundary point ``p`` is
+``N_K(p) = {g : g^T (x - p) <= 0 for all x in K}``: one ray where the surface is smooth (a sphere,
+a capsule, a box face), the cone of the adjacent faces' outward normals at an edge or a vertex
+(a box corner: three axes; a polygon corner: two edge normals; a cylinder rim: the radial
+direction and the axis). A contact normal ``n`` (into the object) is valid where
+``-n in N_object(p)`` and ``n in N_body(p)``.
+"""
 
 from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -83,6 +95,129 @@ def body_surface_distance(scene: Scene, hand: HandKinematics, ref: BodyRef, p: A
         return shape_signed_distance(body.shape, np.asarray(p, dtype=float), scene.dim)
     a, b = hand.body_segment(ref, hand.q0)
     return segment_distance(np.asarray(p, dtype=float), a, b) - hand.body_radius(ref)
+
+
+@dataclass(frozen=True)
+class NormalCone:
+    """The cone ``{G^T c : c >= 0}`` spanned by the unit outward normals ``generators`` ``(k, d)``
+    of the faces that meet at a boundary point (``k = 0``: the point is on no face)."""
+
+    generators: Array  # (k, d)
+
+    def distance(self, u: Array) -> float:
+        """Euclidean distance ``|u - proj_N(u)|`` of ``u`` ``(d,)`` to the cone.
+
+        The projection lies in the relative interior of a face spanned by some subset ``S`` of
+        the generators, where it is the least-squares fit of ``u`` by ``G_S`` with ``c_S >= 0``; so
+        the distance is the least residual over the subsets whose fit is non-negative (exact;
+        ``k <= 6`` here, so at most 63 solves of size ``d x |S|``)."""
+        u = np.asarray(u, dtype=float)
+        best = float(np.linalg.norm(u))  # the empty face: proj = 0
+        G = self.generators
+        for size in range(1, G.shape[0] + 1):
+            for S in itertools.combinations(range(G.shape[0]), size):
+                GS = G[list(S)].T  # (d, |S|)
+                c, *_ = np.linalg.lstsq(GS, u, rcond=None)
+                if np.all(c >= -1e-12):
+                    best = min(best, float(np.linalg.norm(u - GS @ np.maximum(c, 0.0))))
+        return best
+
+    def contains(self, u: Array, tol: float) -> bool:
+        """Whether the unit vector ``u`` is within ``tol`` (the sine of an angle) of the cone."""
+        return self.distance(u) <= tol
+
+
+def _unit(v: Array) -> Array:
+    return v / np.linalg.norm(v)
+
+
+def _perpendiculars(e: Array) -> Array:
+    """Orthonormal basis ``(d-1, d)`` of the complement of the unit vector ``e``."""
+    if e.shape[0] == 2:
+        return np.array([[-e[1], e[0]]])
+    _, _, Vt = np.linalg.svd(e[None, :])
+    return Vt[1:]  # (2, 3)
+
+
+def segment_normal_cone(p: Array, a: Array, b: Array, radius: float, tol: float) -> NormalCone:
+    """Normal cone at ``p`` of the segment ``[a, b]`` inflated by ``radius`` (a link's capsule).
+
+    ``radius > tol``: the capsule is smooth, one ray ``(p - q) / |p - q|`` from the closest axis
+    point ``q``. Otherwise the bare segment: the complement of its direction ``e`` at an interior
+    point (``+-`` each perpendicular), plus ``-e`` within ``tol`` of ``a`` and ``+e`` within ``tol``
+    of ``b``."""
+    p, a, b = (np.asarray(x, dtype=float) for x in (p, a, b))
+    ab = b - a
+    length = float(np.linalg.norm(ab))
+    t = float(np.clip((p - a) @ ab / length**2, 0.0, 1.0)) if length > 0 else 0.0
+    off = p - (a + t * ab)
+    if radius > tol and float(np.linalg.norm(off)) > 0:
+        return NormalCone(_unit(off)[None, :])
+    if length == 0:  # a point: every direction
+        E = np.eye(p.shape[0])
+        return NormalCone(np.vstack([E, -E]))
+    e = ab / length
+    P = _perpendiculars(e)
+    gens = [*P, *(-P)]
+    if t * length <= tol:
+        gens.append(-e)
+    if (1.0 - t) * length <= tol:
+        gens.append(e)
+    return NormalCone(np.array(gens))
+
+
+def shape_normal_cone(shape: object, p_local: Array, dim: int, tol: float) -> NormalCone | None:
+    """Normal cone of a shape at ``p_local`` (its frame) ``(d,)``: the outward normals of every
+    face, edge or vertex feature within ``tol`` of the point (so a point within ``tol`` of an edge
+    has the edge's cone). ``None`` for shapes without one here (meshes)."""
+    p = np.asarray(p_local, dtype=float)[:dim]
+    if isinstance(shape, Disk | Sphere):
+        r = float(np.linalg.norm(p))
+        return NormalCone((p / r)[None, :] if r > 0 else np.zeros((0, dim)))
+    if isinstance(shape, Box):
+        c = np.asarray(shape.position if shape.position is not None else np.zeros(dim), dtype=float)
+        q = np.abs(p - c) - np.asarray(shape.size, dtype=float) / 2.0  # (d,) > -tol on the faces at p
+        faces = [np.sign(p[k] - c[k]) * np.eye(dim)[k] for k in range(dim) if q[k] >= -tol]
+        return NormalCone(np.array(faces).reshape(-1, dim))
+    if isinstance(shape, Polygon):
+        V = np.asarray(shape.vertices, dtype=float)
+        gens = []
+        for i in range(len(V)):
+            a, b = V[i], V[(i + 1) % len(V)]
+            if segment_distance(p, a, b) <= tol:
+                e = _unit(b - a)
+                gens.append(np.array([e[1], -e[0]]))  # outward for CCW polygons
+        return NormalCone(np.array(gens).reshape(-1, 2))
+    if isinstance(shape, Cylinder):
+        rho = float(np.linalg.norm(p[:2]))
+        gens = []
+        if rho >= shape.radius - tol and rho > 0:
+            gens.append(np.array([p[0] / rho, p[1] / rho, 0.0]))
+        if abs(float(p[2])) >= shape.height / 2.0 - tol:
+            gens.append(np.array([0.0, 0.0, np.sign(p[2])]))
+        return NormalCone(np.array(gens).reshape(-1, 3))
+    if isinstance(shape, Segment):
+        a, b = (np.asarray(x, dtype=float) for x in shape.points)
+        return segment_normal_cone(p, a, b, 0.0, tol)
+    return None
+
+
+def object_normal_cone(scene: Scene, p: Array, tol: float) -> NormalCone | None:
+    """Normal cone of the object at the world point ``p``, in world coordinates."""
+    R = object_rotation(scene)[: scene.dim, : scene.dim]
+    local = R.T @ (np.asarray(p, dtype=float) - object_origin(scene))
+    cone = shape_normal_cone(scene.object.shape, local, scene.dim, tol)
+    return None if cone is None else NormalCone(cone.generators @ R.T)
+
+
+def body_normal_cone(scene: Scene, hand: HandKinematics, ref: BodyRef, p: Array, tol: float) -> NormalCone | None:
+    """Normal cone at ``p`` of a fixed body (given in world coordinates) or of a finger link (its
+    axis inflated by the link radius), in world coordinates."""
+    if ref.finger is None:
+        body = next(b for b in scene.fixed_bodies if b.name == ref.name)
+        return shape_normal_cone(body.shape, np.asarray(p, dtype=float), scene.dim, tol)
+    a, b = hand.body_segment(ref, hand.q0)
+    return segment_normal_cone(np.asarray(p, dtype=float), a, b, hand.body_radius(ref), tol)
 
 
 def object_size(scene: Scene) -> float:

@@ -101,6 +101,7 @@ __all__ = [
     "ModeTolerances",
     "StickSlideMode",
     "combination_admissible",
+    "contacting_separating_modes",
     "enumerate_modes",
     "mode_hyperplanes",
 ]
@@ -668,6 +669,50 @@ def _token_rank(slide_tokens: Sequence[str]) -> dict[str, int]:
     return {"F": 0, **{t: k + 1 for k, t in enumerate(order)}, "D": len(order) + 1}
 
 
+def _reduced_search(
+    system: GraspSystem, tangent_planes: int, factor_free_contacts: bool, tol: ModeTolerances
+) -> tuple[_Search, list[int], list[int]]:
+    """The search over the contacts that are not free (``kept``), on the columns of the joints
+    that move them and of ``dr``; ``free`` are the factored contacts (module docstring)."""
+    L, M = system.L, system.M
+    normal, tangent = mode_hyperplanes(system, tangent_planes)  # (L, n), (L, m, n)
+    m = tangent.shape[1]
+    free_c, free_q = _free_contacts(system, tol) if factor_free_contacts else ([], [])
+    kept = [i for i in range(L) if i not in set(free_c)]
+    cols = [j for j in range(M) if j not in set(free_q)] + list(range(M, M + system.D))
+    r_cols = np.arange(len(cols) - system.D, len(cols))
+    search = _Search(
+        normal[np.ix_(kept, cols)],
+        tangent[kept][:, :, cols].reshape(len(kept), m, len(cols)),
+        r_cols,
+        system.dim,
+        tol,
+    )
+    return search, kept, free_c
+
+
+def _cs_order(signs: str) -> str:
+    """Sort key of sign strings: contacting ``'0'`` before separating ``'-'``, contact by contact."""
+    return signs.translate(str.maketrans("0-", "01"))
+
+
+def contacting_separating_modes(
+    system: GraspSystem, *, factor_free_contacts: bool = True, tol: ModeTolerances | None = None
+) -> tuple[ContactSeparatingMode, ...]:
+    """The contacting/separating modes of ``system`` only (stage 1 of :func:`enumerate_modes`,
+    the same list as its ``contacting_separating``): the sign vectors ``s in {0, -}^L`` realised
+    by some ``v`` with ``n_i^T A_i v = 0`` where ``s_i = '0'``, ``< 0`` where ``'-'`` and never
+    ``> 0`` (no penetration); the count Huang, Cheng and Mason (2020) report, e.g. 10 for a cube
+    on a table with four corner contacts. At most ``L`` LPs a mode."""
+    tol = tol or ModeTolerances()
+    search, kept, free_c = _reduced_search(system, 2, factor_free_contacts, tol)
+    leaves = [(lf.labels, lf.object_moves) for lf in search.contacting_separating()]
+    cs, _ = _expand(leaves, kept, free_c, ["0", "-"], system.L)
+    return tuple(
+        ContactSeparatingMode("".join(s), mv) for s, mv in sorted(cs, key=lambda x: _cs_order("".join(x[0])))
+    )
+
+
 def enumerate_modes(
     system: GraspSystem,
     *,
@@ -690,22 +735,10 @@ def enumerate_modes(
     Raises :class:`SolverError` when HiGHS fails (infeasibility is an answer, not a failure).
     """
     tol = tol or ModeTolerances()
-    L, d, M = system.L, system.dim, system.M
-    normal, tangent = mode_hyperplanes(system, tangent_planes)  # (L, n), (L, m, n)
-    m = tangent.shape[1]
+    L, d = system.L, system.dim
     U = tangent_directions(d, tangent_planes)
-
-    free_c, free_q = _free_contacts(system, tol) if factor_free_contacts else ([], [])
-    kept = [i for i in range(L) if i not in set(free_c)]
-    cols = [j for j in range(M) if j not in set(free_q)] + list(range(M, M + system.D))
-    r_cols = np.arange(len(cols) - system.D, len(cols))
-    search = _Search(
-        normal[np.ix_(kept, cols)],
-        tangent[kept][:, :, cols].reshape(len(kept), m, len(cols)),
-        r_cols,
-        d,
-        tol,
-    )
+    search, kept, free_c = _reduced_search(system, tangent_planes, factor_free_contacts, tol)
+    m = search.m
     counts: dict[str, int] = {}
 
     cs_leaves = search.contacting_separating()
@@ -736,8 +769,7 @@ def enumerate_modes(
     complete = complete and ok
 
     cs_modes = tuple(
-        ContactSeparatingMode("".join(s), mv)
-        for s, mv in sorted(cs, key=lambda x: "".join(x[0]).translate(str.maketrans("0-", "01")))
+        ContactSeparatingMode("".join(s), mv) for s, mv in sorted(cs, key=lambda x: _cs_order("".join(x[0])))
     )
     cat_modes = tuple(
         CategoryMode("".join(c), mv)

@@ -7,9 +7,14 @@ quaternions and joint axes, vector lengths for ``dim``, shapes that fit ``dim``,
 names, counts (``q`` per finger, contacts, joint torque limits). Every check that can fail names
 the field it concerns through pydantic's error location, e.g. ``contacts.2.point``.
 
-The geometric checks (contact normals of unit length pointing into the object, contact bodies
-that exist, contact points on the surfaces of their body and of the object) and loading from
-JSON/YAML live in :mod:`analysis.loader`.
+The geometric checks (contact normals of unit length in the normal cones of the object and of
+the body, contact bodies that exist, contact points on the surfaces of their body and of the
+object) and loading from JSON/YAML live in :mod:`analysis.loader`. A contact normal off unit
+length by at most ``NORMALISE_TOL`` is normalised here and the scene keeps a note of it
+(:attr:`Scene.notes`); the loader refuses the others.
+
+Any number of contacts is accepted; only the full enumeration of every combination (``3**L``)
+is limited, to ``MAX_CONTACTS``, by :func:`check_enumerable` at its entry points.
 """
 
 from __future__ import annotations
@@ -23,6 +28,8 @@ from pydantic import (
     ConfigDict,
     Discriminator,
     Field,
+    ModelWrapValidatorHandler,
+    PrivateAttr,
     Tag,
     ValidationError,
     field_validator,
@@ -30,10 +37,17 @@ from pydantic import (
 )
 from pydantic_core import InitErrorDetails, PydanticCustomError
 
-#: Maximum number of contacts a scene may declare (3**L combinations are enumerated).
+from analysis.exceptions import SceneError
+
+#: Most contacts a full enumeration takes (it tests up to 3**L combinations); one combination,
+#: the kinematic modes and the planner take any number (:func:`check_enumerable`).
 MAX_CONTACTS = 16
-#: Tolerance on the norm of unit vectors (normals, quaternions, axes).
+#: Tolerance on the norm of unit vectors (quaternions, axes; normals after normalisation).
 UNIT_TOL = 1e-4
+#: Contact normals off unit length by at most this are normalised, with a note (``Scene.notes``).
+NORMALISE_TOL = 1e-3
+#: Normals off unit length by at most this are unit to the precision of the input: kept as given.
+_UNIT_EXACT = 1e-9
 
 
 def _finite(values: list[float]) -> list[float]:
@@ -43,7 +57,10 @@ def _finite(values: list[float]) -> list[float]:
     return values
 
 
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
+#: Largest magnitude of a scene coordinate, angle or wrench component: physically generous
+#: (a million metres or newtons), and far inside what the LP solvers take as finite (1e20).
+MAX_MAGNITUDE = 1e6
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False, ge=-MAX_MAGNITUDE, le=MAX_MAGNITUDE)]
 Vec = Annotated[list[FiniteFloat], Field(min_length=1)]
 Vec2 = Annotated[list[FiniteFloat], Field(min_length=2, max_length=2)]
 Vec3 = Annotated[list[FiniteFloat], Field(min_length=3, max_length=3)]
@@ -271,10 +288,37 @@ _UNION_TAGS = {
 
 
 class Contact(_Model):
+    """A contact: ``point`` (world) on ``body`` and on the object, unit ``normal`` (world) into the
+    object, friction coefficient ``mu``. A normal off unit length by ``1e-9 < |norm - 1| <=
+    NORMALISE_TOL`` is divided by its norm (``normalised_from`` keeps the norm given)."""
+
     body: Annotated[str, Field(min_length=1)]
     point: Vec
     normal: Vec
-    mu: Annotated[float, Field(ge=0, allow_inf_nan=False)]
+    mu: Annotated[float, Field(ge=0, le=MAX_MAGNITUDE, allow_inf_nan=False)]
+    _normalised_from: float | None = PrivateAttr(default=None)
+
+    @model_validator(mode="wrap")
+    @classmethod
+    def _normalise(cls, data: Any, handler: ModelWrapValidatorHandler[Contact]) -> Contact:
+        contact = handler(data)
+        norm = math.sqrt(sum(x * x for x in contact.normal))
+        if _UNIT_EXACT < abs(norm - 1.0) <= NORMALISE_TOL:
+            contact = contact.model_copy(update={"normal": [x / norm for x in contact.normal]})
+            contact._normalised_from = norm
+        return contact
+
+    @property
+    def normalised_from(self) -> float | None:
+        """The norm of the normal as given, when it was normalised; else ``None``."""
+        return self._normalised_from
+
+    def __eq__(self, other: object) -> bool:
+        """Equal fields: the note of a normalisation is not part of the contact (a scene dumped
+        and validated again is equal to the scene)."""
+        if not isinstance(other, Contact):
+            return NotImplemented
+        return self.__dict__ == other.__dict__
 
 
 class Scene(_Model):
@@ -306,6 +350,15 @@ class Scene(_Model):
         """Total number of joints of the hand (the length of ``q = col[q_i]``)."""
         return int(sum(len(f.q) for f in self.fingers))
 
+    @property
+    def notes(self) -> tuple[str, ...]:
+        """Corrections made to the input, one line each naming the field (normals normalised)."""
+        return tuple(
+            f"contacts.{i}.normal: norm {c.normalised_from:.9g} normalised to unit length"
+            for i, c in enumerate(self.contacts)
+            if c.normalised_from is not None
+        )
+
     @model_validator(mode="after")
     def _check_structure(self) -> Scene:
         errors: list[InitErrorDetails] = []
@@ -317,6 +370,16 @@ class Scene(_Model):
         if errors:
             raise ValidationError.from_exception_data("Scene", errors)
         return self
+
+
+def check_enumerable(scene: Scene) -> None:
+    """Raise :class:`SceneError` at ``contacts`` when the scene has more than ``MAX_CONTACTS``
+    contacts: the full enumeration tests up to ``3**L`` combinations. One combination, the
+    kinematic contact modes and the planner take any number of contacts."""
+    L = len(scene.contacts)
+    if L > MAX_CONTACTS:
+        raise SceneError(("contacts",), f"has {L} contacts; enumerating every combination (3^{L}) is limited to "
+                         f"{MAX_CONTACTS} contacts: analyse one combination, or list the modes (ctp modes)")
 
 
 def scene_error_details(loc: tuple[str | int, ...], msg: str, value: Any) -> InitErrorDetails:
@@ -376,9 +439,6 @@ def _check_shapes_and_lengths(scene: Scene, err: Any) -> None:
             err(("contacts", i, "point"), f"must have {dim} components for dim={dim}", c.point)
         if len(c.normal) != dim:
             err(("contacts", i, "normal"), f"must have {dim} components for dim={dim}", c.normal)
-    if len(scene.contacts) > MAX_CONTACTS:
-        err(("contacts",), f"has {len(scene.contacts)} contacts; the limit is {MAX_CONTACTS}",
-            len(scene.contacts))
     if scene.joint_torque_limits is not None:
         M = scene.M
         if len(scene.joint_torque_limits) != M:
@@ -415,6 +475,9 @@ def scene_json_schema() -> dict[str, Any]:
 
 
 __all__ = [
+    "MAX_CONTACTS",
+    "NORMALISE_TOL",
+    "UNIT_TOL",
     "Contact",
     "Finger2D",
     "Finger3D",
@@ -422,6 +485,7 @@ __all__ = [
     "FixedBody",
     "Scene",
     "_format_loc",
+    "check_enumerable",
     "clean_loc",
     "scene_error_details",
     "scene_json_schema",

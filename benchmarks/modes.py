@@ -2,7 +2,10 @@
 
 Run: ``.venv/bin/python benchmarks/modes.py [--max-modes N] [--repeat R] [--quick]``.
 
-Prints the machine, then for the example scenes and for synthetic scenes of growing size:
+Prints the machine, then the cube against 1-5 planes of Huang, Cheng & Mason (WAFR 2020) with
+their published contacting/separating counts and the wall time of ``ctp modes`` on the 20-contact
+cube in five planes (a new process, start-up included), then for the example scenes and for
+synthetic scenes of growing size:
 the number of contacts ``L``, joints ``M``, contacting/separating modes (``cs``), stick/slide
 categories (``cat``), sticking/sliding modes (``ss``; ``+`` when ``--max-modes`` stopped the
 listing), LPs solved, seconds (best of ``--repeat``), LPs per mode, and the brute-force pattern
@@ -15,9 +18,12 @@ from __future__ import annotations
 
 import argparse
 import importlib.metadata
+import json
 import os
 import platform
+import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -27,9 +33,12 @@ from numpy.typing import NDArray
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests" / "helpers"))  # cube_planes: the scenes of the published counts
+
+from cube_planes import PUBLISHED_CS_COUNTS, cube_in_planes  # noqa: E402
 
 from analysis.contacts import GraspSystem, build_system, system_from_arrays  # noqa: E402
-from analysis.loader import load_scene  # noqa: E402
+from analysis.loader import load_scene, scene_from_dict  # noqa: E402
 from analysis.modes import ModeEnumeration, enumerate_modes  # noqa: E402
 
 Array = NDArray[np.float64]
@@ -118,6 +127,17 @@ def row(name: str, system: GraspSystem, e: ModeEnumeration, secs: float) -> str:
     )
 
 
+def ctp_modes_seconds(scene: dict[str, object]) -> float:
+    """Wall seconds of ``ctp modes SCENE`` in a new process (the command a user runs)."""
+    ctp = Path(sys.executable).with_name("ctp")
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "scene.json"
+        path.write_text(json.dumps(scene))
+        t0 = time.perf_counter()
+        subprocess.run([str(ctp), "modes", str(path)], check=True, capture_output=True)
+        return time.perf_counter() - t0
+
+
 def fit(xs: Sequence[float], ys: Sequence[float]) -> float:
     """Slope of log y against log x (least squares); nan when x does not vary."""
     lx, ly = np.log(np.maximum(xs, 1e-12)), np.log(np.maximum(ys, 1e-12))
@@ -136,6 +156,16 @@ def main() -> None:
     hv = importlib.metadata.version("highspy")
     print("python", platform.python_version(), "| numpy", np.__version__, "| highspy", hv)
     print(f"max_modes={args.max_modes} (listing cap for sticking/sliding modes; '+' = capped)\n")
+
+    print("cube against k planes (floor, walls x-, y-, x+, y+; 4 corner contacts a plane); pub = published cs")
+    print(HEADER, f"{'pub':>5}")
+    for k, published in enumerate(PUBLISHED_CS_COUNTS, start=1):
+        system = build_system(scene_from_dict(cube_in_planes(k)))
+        e, secs = run(system, args.max_modes, args.repeat)
+        print(row(f"  {k} planes", system, e, secs), f"{published:>5}",
+              "ok" if e.n_contacting_separating == published else "MISMATCH")
+    print(f"  ctp modes on the 20-contact cube in five planes: {ctp_modes_seconds(cube_in_planes(5)):.2f} s wall "
+          "(one process, imports included; target < 10 s)\n")
 
     print("examples")
     print(HEADER)

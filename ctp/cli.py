@@ -25,12 +25,12 @@ from rich.table import Table
 from analysis.combination import analyze_combination
 from analysis.contacts import build_system
 from analysis.dafc import SEMANTICS
-from analysis.enumerate import enumerate_combinations
+from analysis.enumerate import enumerate_combinations, parse_where
 from analysis.exceptions import CTPError, SceneError
 from analysis.geometry import object_size
-from analysis.loader import load_scene, scene_from_dict
+from analysis.loader import load_scene, read_scene_data, scene_from_dict
 from analysis.modes import combination_admissible, enumerate_modes
-from analysis.scene import scene_json_schema
+from analysis.scene import check_enumerable, scene_json_schema
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="Contact-state closure analysis and planning.")
 console = Console()
@@ -43,11 +43,34 @@ def _fail(message: str, code: int = 2) -> NoReturn:
 
 
 def _load(scene_path: Path) -> Any:
-
+    """The scene, or exit 2 naming the field; corrections the loader made (``Scene.notes``, e.g. a
+    normal normalised) are printed as notes on stderr."""
     try:
-        return load_scene(scene_path)
+        sc = load_scene(scene_path)
     except SceneError as e:
         _fail(f"{scene_path}: {e}")
+    for note in sc.notes:
+        err_console.print(f"[bold yellow]note:[/] {scene_path}: {note}", highlight=False, soft_wrap=True)
+    return sc
+
+
+def _check_out(path: Path | None, option: str) -> None:
+    """Before any work: the folder an output file goes to must exist (exit 2 naming the option)."""
+    if path is None:
+        return
+    parent = path.parent
+    if not parent.is_dir():
+        _fail(f"{option}: cannot write {path}: the folder '{parent}' does not exist")
+    if path.is_dir():
+        _fail(f"{option}: cannot write {path}: it is a folder")
+
+
+def _write(path: Path, text: str, option: str) -> None:
+    try:
+        path.write_text(text)
+    except OSError as e:
+        _fail(f"{option}: cannot write {path}: {e.strerror or e}")
+    console.print(f"wrote {path}")
 
 
 def _parse_vector(text: str, field: str) -> np.ndarray:
@@ -77,9 +100,15 @@ def analyze(
     feasible_only: Annotated[bool, typer.Option(help="list only feasible combinations")] = False,
     samples: Annotated[int | None, typer.Option(help="directions sampled for the DAFC set (--combination)")] = None,
     prune_modes: Annotated[bool, typer.Option(help="prune with kinematic contact modes")] = True,
+    where: Annotated[str | None, typer.Option(help="only combinations with these letter counts, e.g. 'D>=3' "
+                                              "or 'F<=2, S==0'")] = None,
+    limit: Annotated[int | None, typer.Option(help="stop after this many feasible combinations "
+                                              "(strongest first)")] = None,
 ) -> None:
     """Closure analysis: every combination (table), or the full report of one."""
 
+    _check_out(json_out, "--json")
+    _check_out(plot, "--plot")
     sc = _load(scene)
     system = build_system(sc)
     if nu is not None and not 0.0 <= nu <= 1.0:
@@ -91,6 +120,21 @@ def analyze(
             _fail(f"direction: has {len(dvec)} components; the object has {sc.D} coordinates")
     if combination is None and (direction is not None or nu is not None):
         _fail("direction/nu: need --combination")
+    if combination is not None and (where is not None or limit is not None):
+        _fail("where/limit: filter the table of every combination; drop them with --combination")
+    if limit is not None and limit < 1:
+        _fail(f"limit: {limit} must be at least 1")
+    where_filter = None
+    if where is not None:
+        try:
+            where_filter = parse_where(where)
+        except CTPError as e:
+            _fail(str(e))
+    if combination is None:
+        try:
+            check_enumerable(sc)  # one combination and the modes take any number of contacts
+        except SceneError as e:
+            _fail(f"{scene}: {e}")
     try:
         if combination is not None:
             if samples is not None and samples < 4:
@@ -99,15 +143,14 @@ def analyze(
             _print_report(report, sc)
             if json_out:
                 data = {"scene": sc.name, **report.to_json()}
-                json_out.write_text(json.dumps(data, indent=2))
-                console.print(f"wrote {json_out}")
+                _write(json_out, json.dumps(data, indent=2), "--json")
             if plot:
                 from ctp.plot import plot_report
 
                 plot_report(plot, sc, report)
                 console.print(f"wrote {plot}")
             return
-        summaries = _enumerate(system, prune_modes)
+        summaries, stopped = _enumerate(system, prune_modes, where_filter, limit)
     except SceneError as e:
         _fail(str(e))
     except CTPError as e:
@@ -123,10 +166,11 @@ def analyze(
     console.print(table)
     if len(rows) < len(summaries):
         console.print(f"(showing feasible combinations only; {len(summaries)} in --json)")
+    if stopped:
+        console.print(f"(stopped after {limit} feasible combinations, strongest first: --limit)")
     if json_out:
         data = {"scene": sc.name, "semantics": SEMANTICS, "combinations": [s.to_json() for s in summaries]}
-        json_out.write_text(json.dumps(data, indent=2))
-        console.print(f"wrote {json_out}")
+        _write(json_out, json.dumps(data, indent=2), "--json")
     if plot:
         from ctp.plot import plot_report
 
@@ -136,7 +180,7 @@ def analyze(
         console.print(f"wrote {plot}")
 
 
-def _enumerate(system: Any, prune_modes: bool) -> list[Any]:
+def _enumerate(system: Any, prune_modes: bool, where: Any = None, limit: int | None = None) -> tuple[list[Any], bool]:
     admissible = None
     if prune_modes:
         modes = enumerate_modes(system, refine=False)
@@ -148,14 +192,17 @@ def _enumerate(system: Any, prune_modes: bool) -> list[Any]:
         def progress(k: int, n: int) -> None:
             bar.update(task, completed=k, total=n)
 
-        summaries, _ = enumerate_combinations(system, admissible=admissible, progress=progress)
-    return summaries
+        summaries, stats = enumerate_combinations(system, admissible=admissible, progress=progress, where=where,
+                                                  limit=limit)
+    return summaries, stats.stopped_at_limit
 
 
 def _print_report(report: Any, sc: Any) -> None:
     s = report.summary
     console.print(f"[bold]{sc.name}[/] combination [bold]{s.combination}[/]: "
                   f"{'feasible' if s.feasible else 'not feasible'} ({s.reason})")
+    for note in report.notes:
+        console.print(f"  [yellow]note:[/] {note}", highlight=False, soft_wrap=True)
     ms = report.parts.ms
     console.print(f"  motion space a = {ms.a}, object part a~ = {ms.a_bar}, redundancy {ms.n_redundant}; "
                   f"p = rank(G_c Gamma) = {report.parts.st.p}")
@@ -169,8 +216,13 @@ def _print_report(report: Any, sc: Any) -> None:
         console.print(f"  DAFC (22): dim {d.dim}, {int(d.member.sum())} of {len(d.member)} sampled directions, "
                       f"{'exact' if d.exact else 'sampled'}; example {_fmt(s.example_direction)}")
     if report.dpfc is not None:
-        console.print(f"  DPFC (28): dim {report.dpfc.dim}, {len(report.dpfc.vertices)} vertices, "
-                      f"{len(report.dpfc.rays)} rays")
+        dp = report.dpfc
+        if dp.enumerated:
+            console.print(f"  DPFC (28): dim {dp.dim}, {len(dp.vertices)} vertices, {len(dp.rays)} rays")
+        else:
+            console.print(f"  DPFC (28): dim {dp.dim}, by {len(dp.b_xi)} inequalities in {dp.W_xi.shape[1]} "
+                          f"internal-force coordinates (too many to enumerate its vertices); "
+                          f"{len(dp.vertices)} extreme wrenches along its axes, {dp.unbounded_axes} unbounded")
     if report.direction_test is not None:
         t = report.direction_test
         console.print(f"  direction {_fmt(t.direction)}: {'in DAFC' if t.member else 'not in DAFC'} ({t.reason})")
@@ -208,6 +260,7 @@ def modes(
 ) -> None:
     """Kinematic contact modes (contacting/separating and sticking/sliding) that some motion realises."""
 
+    _check_out(json_out, "--json")
     sc = _load(scene)
     if tangent_planes < 2:
         _fail(f"tangent-planes: {tangent_planes} must be at least 2")
@@ -221,8 +274,7 @@ def modes(
                   + ("" if e.sticking_sliding_complete else " (listing stopped at --max-modes)")
                   + f"; {e.lp_count} LPs")
     if json_out:
-        json_out.write_text(json.dumps(data, indent=2))
-        console.print(f"wrote {json_out}")
+        _write(json_out, json.dumps(data, indent=2), "--json")
 
 
 def _read_plan_file(path: Path) -> dict[str, Any] | None:
@@ -231,11 +283,9 @@ def _read_plan_file(path: Path) -> dict[str, Any] | None:
     if path.suffix.lower() != ".json":
         return None
     try:
-        data = json.loads(path.read_text())
-    except OSError as e:
-        _fail(f"{path}: cannot read: {e.strerror}")
-    except json.JSONDecodeError:
-        return None  # let the scene loader report it
+        data = read_scene_data(path)  # the scene files' parser: size, depth and encoding checked
+    except SceneError as e:
+        _fail(f"{path}: {e}")
     return data if isinstance(data, dict) and "steps" in data else None
 
 
@@ -268,8 +318,7 @@ def _simulate_plan_file(plan_path: Path, data: dict[str, Any], scene_path: Path 
         _fail(str(e), code=1)
     _print_plan_simulation(rep)
     if json_out:
-        json_out.write_text(json.dumps(rep.to_json(), indent=1))
-        console.print(f"wrote {json_out}")
+        _write(json_out, json.dumps(rep.to_json(), indent=1), "--json")
     if rep.dropped:
         raise typer.Exit(1)
 
@@ -311,6 +360,7 @@ def simulate(
     from sim.report import format_report
     from sim.torque_replay import simulate_torques
 
+    _check_out(json_out, "--json")
     plan_data = _read_plan_file(scene)
     if plan_data is not None:
         if combination is not None or torque is not None or direction is not None:
@@ -358,8 +408,7 @@ def simulate(
                           "agrees": c.agrees, "mean_normal_force": c.mean_normal_force, "slip": c.slip}
                          for c in result.contacts],
         }
-        json_out.write_text(json.dumps(data, indent=2))
-        console.print(f"wrote {json_out}")
+        _write(json_out, json.dumps(data, indent=2), "--json")
 
 
 @app.command()
@@ -379,6 +428,7 @@ def plan(
     from planner import Goal
     from planner import plan as make_plan
 
+    _check_out(out, "--out")
     sc = _load(scene)
     try:
         g = Goal(type=goal, combination=combination,
@@ -423,8 +473,7 @@ def plan(
         _print_plan_simulation(rep)
         data["replay"] = rep.to_json()
     if out is not None:
-        out.write_text(json.dumps(data, indent=1))
-        console.print(f"wrote {out}")
+        _write(out, json.dumps(data, indent=1), "--out")
     if not result.found:
         raise typer.Exit(1)
 
@@ -441,10 +490,10 @@ def batch(ctx: typer.Context) -> None:
 def schema(out: Annotated[Path | None, typer.Option(help="write to a file instead of stdout")] = None) -> None:
     """Print the JSON Schema of the scene format."""
 
+    _check_out(out, "--out")
     text = json.dumps(scene_json_schema(), indent=2)
     if out:
-        out.write_text(text)
-        console.print(f"wrote {out}")
+        _write(out, text, "--out")
     else:
         sys.stdout.write(text + "\n")
 

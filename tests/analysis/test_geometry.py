@@ -9,10 +9,15 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from analysis.geometry import (
+    NormalCone,
+    body_normal_cone,
     body_surface_distance,
+    object_normal_cone,
     object_origin,
     object_rotation,
     object_signed_distance,
+    segment_normal_cone,
+    shape_normal_cone,
     shape_signed_distance,
 )
 from analysis.kinematics import HandKinematics
@@ -147,3 +152,138 @@ def test_canonical_contacts_are_on_both_surfaces(name: str) -> None:
         # the normal points into the object: a step along it goes inside
         dist = object_signed_distance(scene, p + 0.01 * np.asarray(c.normal))
         assert dist is not None and dist < -0.005
+
+
+# --------------------------------------------------------------------------------------------
+# Normal cones: N(p) = {g : g^T (x - p) <= 0 for all x in the body}
+
+
+UNIT_CUBE = Box(type="box", size=[1.0, 1.0, 1.0])
+EX, EY, EZ = np.eye(3)
+
+
+def _u(*v: float) -> np.ndarray:
+    a = np.array(v, dtype=float)
+    return a / np.linalg.norm(a)
+
+
+@pytest.mark.parametrize(
+    ("p", "n_generators"),
+    [((-0.5, -0.5, -0.5), 3), ((-0.5, 0.1, -0.5), 2), ((0.2, 0.1, -0.5), 1), ((-0.5 + 5e-5, 0.1, -0.5), 2)],
+)
+def test_box_normal_cone_has_one_generator_per_face_at_the_point(p: tuple[float, ...], n_generators: int) -> None:
+    # a vertex (3 faces), an edge (2), a face (1), and a face point within tol = 1e-4 of an edge
+    cone = shape_normal_cone(UNIT_CUBE, np.array(p), 3, 1e-4)
+    assert cone is not None and cone.generators.shape == (n_generators, 3)
+
+
+@pytest.mark.parametrize(
+    ("u", "expected"),
+    [
+        (-EZ, 0.0),  # the table's normal at the corner: inside
+        (_u(-1, -1, -1), 0.0),  # the corner's diagonal: inside
+        (_u(-1, -2, -0.5), 0.0),
+        (EZ, 1.0),  # into the cube: the projection onto the cone is 0
+        (_u(0.6, 0, -0.8), 0.6),  # off the x-face by its x part
+        (_u(0.6, 0.8, 0), 1.0),
+    ],
+)
+def test_box_corner_cone_distances(u: np.ndarray, expected: float) -> None:
+    cone = shape_normal_cone(UNIT_CUBE, np.array([-0.5, -0.5, -0.5]), 3, 1e-4)
+    assert cone is not None and cone.distance(u) == pytest.approx(expected, abs=1e-12)
+
+
+def test_box_face_cone_is_the_face_normal() -> None:
+    cone = shape_normal_cone(UNIT_CUBE, np.array([0.2, 0.1, -0.5]), 3, 1e-4)
+    assert cone is not None
+    for theta in (1e-4, 0.01, 0.3):  # a tilt by theta is sin(theta) off the ray
+        assert cone.distance(np.array([np.sin(theta), 0.0, -np.cos(theta)])) == pytest.approx(np.sin(theta))
+    assert cone.contains(-EZ, 1e-12) and not cone.contains(_u(0.01, 0, -1), 1e-3)
+
+
+def test_polygon_corner_and_cylinder_rim_cones() -> None:
+    square = Polygon(type="polygon", vertices=[[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+    cone = shape_normal_cone(square, np.array([0.5, 0.5]), 2, 1e-4)
+    assert cone is not None and cone.generators.shape == (2, 2)
+    a = np.radians(30)
+    assert cone.distance(np.array([np.cos(a), np.sin(a)])) == pytest.approx(0.0, abs=1e-12)
+    assert cone.distance(np.array([np.cos(a), -np.sin(a)])) == pytest.approx(np.sin(a))  # 30 deg below
+    can = Cylinder(type="cylinder", radius=0.5, height=2.0)
+    rim = shape_normal_cone(can, np.array([0.0, 0.5, 1.0]), 3, 1e-4)
+    assert rim is not None and rim.generators.shape == (2, 3)
+    assert rim.distance(_u(0, 1, 1)) == pytest.approx(0.0, abs=1e-12)
+    assert rim.distance(_u(1, 1, 1)) == pytest.approx(1 / np.sqrt(3))  # the x part is off
+    side = shape_normal_cone(can, np.array([0.0, 0.5, 0.3]), 3, 1e-4)
+    assert side is not None and side.distance(EY) == pytest.approx(0.0, abs=1e-12)
+    sphere = shape_normal_cone(Sphere(type="sphere", radius=2.0), np.array([0.0, 1.2, 1.6]), 3, 1e-4)
+    assert sphere is not None and sphere.distance(_u(0, 0.6, 0.8)) == pytest.approx(0.0, abs=1e-12)
+    assert shape_normal_cone(Mesh(type="mesh", file="x.stl"), np.zeros(3), 3, 1e-4) is None
+
+
+def test_segment_and_capsule_cones() -> None:
+    a, b = np.zeros(3), EX
+    capsule = segment_normal_cone(np.array([0.5, 0.1, 0.0]), a, b, 0.1, 1e-4)
+    assert capsule.generators.shape == (1, 3) and capsule.distance(EY) == pytest.approx(0.0, abs=1e-12)
+    cap = segment_normal_cone(np.array([1.1, 0.0, 0.0]), a, b, 0.1, 1e-4)  # the spherical end
+    assert cap.distance(EX) == pytest.approx(0.0, abs=1e-12)
+    bare = segment_normal_cone(np.array([0.5, 0.0, 0.0]), a, b, 0.0, 1e-4)  # every perpendicular
+    assert bare.distance(_u(0, 0.6, 0.8)) == pytest.approx(0.0, abs=1e-12)
+    assert bare.distance(_u(0.6, 0.8, 0)) == pytest.approx(0.6)
+    end = segment_normal_cone(b, a, b, 0.0, 1e-4)  # the half-space g . e >= 0
+    assert end.distance(EX) == pytest.approx(0.0, abs=1e-12)
+    assert end.distance(_u(-0.6, 0.8, 0)) == pytest.approx(0.6)
+    table = Segment(type="segment", points=[[-1.0, 0.0], [1.0, 0.0]])
+    cone = shape_normal_cone(table, np.array([0.3, 0.0]), 2, 1e-4)
+    assert cone is not None and cone.distance(np.array([0.0, 1.0])) == pytest.approx(0.0, abs=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_box_cone_membership_equals_the_support_function(seed: int) -> None:
+    """``u in N(p)`` iff ``p`` maximises ``u^T x`` over the box: ``h(u) = u^T c + sum |u_k| h_k``
+    equals ``u^T p``; and the distance equals scipy's non-negative least squares residual."""
+    from scipy.optimize import nnls
+
+    rng = np.random.default_rng(seed)
+    half = rng.uniform(0.2, 2.0, 3)
+    box = Box(type="box", size=(2 * half).tolist())
+    for _ in range(40):
+        p = rng.uniform(-half, half)
+        active = rng.random(3) < 0.6
+        p[active] = np.sign(rng.normal(size=int(active.sum()))) * half[active]  # a vertex, edge or face
+        if not active.any():
+            p[0] = half[0]
+        cone = shape_normal_cone(box, p, 3, 1e-9)
+        assert cone is not None
+        for _ in range(10):
+            u = _u(*rng.normal(size=3))
+            if rng.random() < 0.5:  # a member: a non-negative combination of the generators
+                u = _u(*(rng.uniform(0, 1, len(cone.generators)) @ cone.generators))
+            gap = float(np.abs(u) @ half - u @ p)
+            assert (cone.distance(u) <= 1e-9) == (gap <= 1e-9)
+            assert cone.distance(u) == pytest.approx(nnls(cone.generators.T, u)[1], abs=1e-9)
+
+
+def test_object_and_body_cones_are_in_world_coordinates() -> None:
+    """A cube turned 45 deg about y stands on its edge x = +0.5, z = -0.5 (local): there the
+    cone of the object is spanned by R e_x and -R e_z, which contains the table's (0, 0, -1)."""
+    from analysis.loader import scene_from_dict
+
+    c = np.sqrt(0.5)
+    scene = scene_from_dict({
+        "dim": 3,
+        "object": {"pose": {"position": [0, 0, c], "quat_wxyz": [np.cos(np.pi / 8), 0, np.sin(np.pi / 8), 0]},
+                   "shape": {"type": "box", "size": [1, 1, 1]}},
+        "external_wrench": [0, 0, -1, 0, 0, 0],
+        "fixed_bodies": [{"name": "table", "shape": {"type": "box", "size": [4, 4, 0.1], "position": [0, 0, -0.05]}}],
+        "contacts": [{"body": "table", "point": [0, y, 0], "normal": [0, 0, 1], "mu": 0.5} for y in (-0.5, 0.5)],
+    })
+    cone = object_normal_cone(scene, np.array([0.0, 0.5, 0.0]), 1e-4)
+    assert cone is not None and cone.generators.shape == (3, 3)  # the corner (y = 0.5) of that edge
+    edge = object_normal_cone(scene, np.array([0.0, 0.2, 0.0]), 1e-4)
+    assert edge is not None
+    np.testing.assert_allclose(sorted(map(tuple, edge.generators)), [(-c, 0, -c), (c, 0, -c)], atol=1e-12)
+    assert edge.distance(-EZ) == pytest.approx(0.0, abs=1e-12)
+    assert edge.distance(_u(np.tan(np.radians(50)), 0, -1)) == pytest.approx(np.sin(np.radians(5)))
+    hand = HandKinematics.from_scene(scene)
+    table = body_normal_cone(scene, hand, hand.resolve_body("table"), np.array([0.0, 0.2, 0.0]), 1e-4)
+    assert table is not None and isinstance(table, NormalCone) and table.distance(EZ) == 0.0

@@ -15,12 +15,14 @@ from pathlib import Path
 import highspy
 import numpy as np
 import pytest
+from cube_planes import PUBLISHED_CS_COUNTS, cube_in_planes
 from numpy.typing import ArrayLike, NDArray
 
+from analysis.combination import analyze_combination
 from analysis.contacts import GraspSystem, build_system, system_from_arrays
 from analysis.exceptions import CombinationError
 from analysis.loader import load_scene, scene_from_dict
-from analysis.modes import ModeTolerances, combination_admissible, enumerate_modes
+from analysis.modes import ModeTolerances, combination_admissible, contacting_separating_modes, enumerate_modes
 
 Array = NDArray[np.float64]
 
@@ -451,3 +453,64 @@ def test_no_contacts_and_bad_combinations() -> None:
         combination_admissible(e, "FF")
     with pytest.raises(CombinationError):
         combination_admissible(e, "X")
+
+
+# --------------------------------------------------------------------------------------------
+# Published counts: a unit cube against 1 to 5 planes (Huang, Cheng & Mason, WAFR 2020)
+
+
+@pytest.mark.parametrize(("k", "expected"), list(enumerate(PUBLISHED_CS_COUNTS, start=1)))
+def test_cube_against_planes_has_the_published_mode_counts(k: int, expected: int) -> None:
+    """The unit cube with its corners against the floor, then the walls x = -0.5, y = -0.5,
+    x = +0.5, y = +0.5 (fixed boxes; vertex-face contacts, four a plane, a corner on two or three
+    planes is a contact of each): 10, 46, 136, 10 and 2 contacting/separating modes. The scene goes
+    through the loader, so the corner normals (the planes') must lie in the cube's normal cones."""
+    scene = scene_from_dict(cube_in_planes(k))
+    assert len(scene.contacts) == 4 * k
+    system = build_system(scene)
+    modes = contacting_separating_modes(system)
+    assert len(modes) == expected == len({m.signs for m in modes})
+    assert enumerate_modes(system, refine=False).contacting_separating == modes
+    if k <= 3:  # 16, 256 and 4096 sign vectors (1.5 s): every one checked by its own max-margin LP
+        assert {m.signs: m.object_moves for m in modes} == brute_contacting_separating(system)
+
+
+def test_cube_in_five_planes_by_hand() -> None:
+    """Floor and four walls: the walls stop every horizontal motion and every rotation (a
+    rotation about a horizontal axis pushes a wall corner into its wall), so the cube either stays
+    or lifts straight up, the floor separating and the walls' corners sliding up: 2 modes."""
+    system = build_system(scene_from_dict(cube_in_planes(5)))
+    modes = contacting_separating_modes(system)
+    assert [(m.signs, m.object_moves) for m in modes] == [("0" * 20, False), ("-" * 4 + "0" * 16, True)]
+
+
+def test_contact_grids_keep_the_corner_modes_at_32_contacts() -> None:
+    """4 x 4 grids of contacts on the floor and one wall (32 contacts): a non-positive affine
+    function on a square vanishes on a face of it, so a grid point is contacting exactly when the
+    corners of its face (or edge) are, and the modes are the 46 of the corners."""
+    grid = build_system(scene_from_dict(cube_in_planes(2, grid=4)))
+    corners = build_system(scene_from_dict(cube_in_planes(2)))
+    assert grid.L == 32
+    at_corners = [i for i, p in enumerate(grid.points) if np.all(np.abs(np.abs(p) - 0.5) < 1e-12)]
+    assert len(at_corners) == 8
+    grid_modes = {"".join(m.signs[i] for i in at_corners) for m in contacting_separating_modes(grid)}
+    assert len(contacting_separating_modes(grid)) == 46
+    assert grid_modes == {m.signs for m in contacting_separating_modes(corners)}
+
+
+@pytest.mark.parametrize(("k", "grid"), [(5, 2), (2, 4)])  # 20 and 32 contacts
+def test_twenty_and_thirty_two_contacts_analyse_one_combination(k: int, grid: int) -> None:
+    """Floor sticking, walls detaching: the floor carries the weight and holds the cube still
+    (a~ = 0). All sliding: in five planes nothing can move (a~ = 0); against the floor and the wall
+    x = -0.5 the cube slides along y only (a~ = 1), which no finger drives (no fingers): not
+    feasible, "DAFC is empty"."""
+    system = build_system(scene_from_dict(cube_in_planes(k, grid=grid)))
+    n = grid * grid  # contacts on the floor, listed first
+    report = analyze_combination(system, "F" * n + "D" * (system.L - n))
+    assert report.stationary is not None and report.parts.ms.a_bar == 0 and not report.summary.feasible
+    report = analyze_combination(system, "S" * system.L)
+    assert report.stationary is not None and not report.summary.feasible
+    assert report.parts.ms.a_bar == (0 if k == 5 else 1)
+    if k == 2:
+        np.testing.assert_allclose(np.abs(report.parts.ms.Lambda_r_t[:, 0]), [0, 1, 0, 0, 0, 0], atol=1e-9)
+        assert report.summary.reason == "DAFC is empty"

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 import yaml
 
@@ -21,6 +22,7 @@ from analysis.scene import (
     Finger3D,
     FingerURDF,
     Scene,
+    check_enumerable,
     scene_json_schema,
 )
 
@@ -303,10 +305,22 @@ def test_non_unit_normal(planar: dict[str, Any], spatial: dict[str, Any]) -> Non
     _expect_error(spatial, ("contacts", 0, "normal"), "unit vector", "1.1")
 
 
-def test_slightly_off_unit_normal_within_tolerance_is_accepted(planar: dict[str, Any]) -> None:
-    n = planar["contacts"][4]["normal"]
-    planar["contacts"][4]["normal"] = [n[0], n[1] * (1 + 5e-5)]
-    assert scene_from_dict(planar).contacts[4].normal[1] == pytest.approx(1 + 5e-5, abs=1e-12)
+@pytest.mark.parametrize("scale", [1 + 5e-5, 1 - 9e-4, 1 + 9.9e-4])
+def test_slightly_off_unit_normal_is_normalised_with_a_note(planar: dict[str, Any], scale: float) -> None:
+    n = planar["contacts"][4]["normal"]  # (0, 1): the palm under the disk
+    planar["contacts"][4]["normal"] = [n[0], n[1] * scale]
+    scene = scene_from_dict(planar)
+    assert scene.contacts[4].normal == [0.0, 1.0]
+    assert scene.contacts[4].normalised_from == pytest.approx(scale, abs=1e-15)
+    assert scene.notes == (f"contacts.4.normal: norm {scale:.9g} normalised to unit length",)
+    again = scene_from_dict(scene.model_dump())  # unit now: no note, and an equal scene
+    assert again.notes == () and again == scene
+    assert scene_from_dict(_raw(PLANAR)).notes == ()  # unit to 1e-9 as given: kept, no note
+
+
+def test_normal_off_unit_length_by_more_than_1e_3_is_refused(planar: dict[str, Any]) -> None:
+    planar["contacts"][4]["normal"] = [0.0, 1.0 + 1.1e-3]
+    _expect_error(planar, ("contacts", 4, "normal"), "unit vector", "1.0011")
 
 
 def test_outward_normal(planar: dict[str, Any], spatial: dict[str, Any]) -> None:
@@ -315,6 +329,124 @@ def test_outward_normal(planar: dict[str, Any], spatial: dict[str, Any]) -> None
     _expect_error(planar, ("contacts", 0, "normal"), "into the object", "outward")
     spatial["contacts"][4]["normal"] = [0.0, 0.0, -1.0]
     _expect_error(spatial, ("contacts", 4, "normal"), "into the object")
+
+
+# --------------------------------------------------------------------------------------------
+# Vertex, edge and face contacts: a normal is valid in the normal cones at its point
+
+
+TABLE = {"name": "table", "shape": {"type": "box", "size": [4.0, 4.0, 0.1], "position": [0.0, 0.0, -0.05]}}
+
+
+def _cube_scene(contacts: list[dict[str, Any]], quat: list[float] | None = None, z: float = 0.5,
+                fingers: list[dict[str, Any]] | None = None) -> dict[str, Any]:
+    """A unit cube centred at ``(0, 0, z)`` on a table (the box under ``z = 0``)."""
+    return {
+        "dim": 3,
+        "object": {"pose": {"position": [0.0, 0.0, z], "quat_wxyz": quat or [1.0, 0.0, 0.0, 0.0]},
+                   "shape": {"type": "box", "size": [1.0, 1.0, 1.0]}},
+        "external_wrench": [0.0, 0.0, -1.0, 0.0, 0.0, 0.0],
+        "fixed_bodies": [TABLE],
+        "fingers": fingers or [],
+        "contacts": contacts,
+    }
+
+
+def _table_contact(x: float, y: float, normal: tuple[float, float, float] = (0.0, 0.0, 1.0)) -> dict[str, Any]:
+    return {"body": "table", "point": [x, y, 0.0], "normal": list(normal), "mu": 0.5}
+
+
+def test_face_face_contact_at_the_four_corners_is_accepted() -> None:
+    scene = scene_from_dict(_cube_scene([_table_contact(x, y) for x in (-0.5, 0.5) for y in (-0.5, 0.5)]))
+    assert len(scene.contacts) == 4 and scene.notes == ()
+
+
+def test_cube_corner_with_the_tables_normal_is_accepted() -> None:
+    # the issue's case: the corner (-0.5, -0.5, -0.5) of a unit cube (here on the table at z = 0)
+    corner = scene_from_dict(_cube_scene([_table_contact(-0.5, -0.5)]))
+    assert corner.contacts[0].normal == [0.0, 0.0, 1.0]
+
+
+def test_polygon_corner_and_cylinder_rim_on_a_table_are_accepted() -> None:
+    # a square's corner on a table: the step along the normal would land on its left edge
+    square = _polygon_scene([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+    square["contacts"] = [{"body": "table", "point": [x, 0.0], "normal": [0.0, 1.0], "mu": 0.3} for x in (-0.5, 0.5)]
+    assert len(scene_from_dict(square).contacts) == 2
+    square["contacts"][0]["normal"] = [0.6, 0.8]  # in the corner's cone, but not the table's
+    _expect_error(square, ("contacts", 0, "normal"), "36.9 deg off the normal cone of body 'table'")  # both sides
+    can = _cube_scene([_table_contact(0.3, 0.4), _table_contact(-0.5, 0.0)], z=1.0)
+    can["object"]["shape"] = {"type": "cylinder", "radius": 0.5, "height": 2.0}  # upright, on its rim
+    assert len(scene_from_dict(can).contacts) == 2
+
+
+def test_a_tilted_normal_is_refused_by_the_cone_it_misses() -> None:
+    t = np.radians(2.0)
+    tilted = (float(np.sin(t)), 0.0, float(np.cos(t)))
+    # inside the corner's cone, outside the table's (its top face: one ray)
+    _expect_error(_cube_scene([_table_contact(-0.5, -0.5, tilted)]), ("contacts", 0, "normal"),
+                  "must point out of body 'table'", "2 deg off the surface normal of body 'table'")
+    # at a face point of the cube it also misses the cube's face normal (checked first)
+    _expect_error(_cube_scene([_table_contact(0.1, 0.2, tilted)]), ("contacts", 0, "normal"),
+                  "must point into the object", "2 deg off the surface normal of the object")
+    _expect_error(_cube_scene([_table_contact(0.1, 0.2, (0.0, 0.0, -1.0))]), ("contacts", 0, "normal"),
+                  "into the object (it points outward)")
+
+
+def test_box_on_a_table_on_one_edge() -> None:
+    """The cube turned 45 deg about y stands on its edge (local x = +0.5, z = -0.5), centre at
+    z = sqrt(1/2): the edge's cone, spanned by (c, 0, -c) and (-c, 0, -c), holds the table's
+    -(0, 0, 1); the two ends of the edge are vertex contacts."""
+    quat = [float(np.cos(np.pi / 8)), 0.0, float(np.sin(np.pi / 8)), 0.0]
+    data = _cube_scene([_table_contact(0.0, y) for y in (-0.5, 0.2, 0.5)], quat=quat, z=float(np.sqrt(0.5)))
+    assert len(scene_from_dict(data).contacts) == 3
+    off = copy.deepcopy(data)
+    off["contacts"][1]["point"] = [0.05, 0.2, 0.0]  # beside the edge: off the cube's surface
+    _expect_error(off, ("contacts", 1, "point"), "away from the object's surface")
+
+
+def _link(name: str, start: list[float], direction: list[float], radius: float) -> dict[str, Any]:
+    """A one-joint finger whose link (a capsule of ``radius``) runs from ``start`` along the unit
+    ``direction`` for length 1."""
+    return {"name": name, "base": {"position": start, "quat_wxyz": [1.0, 0.0, 0.0, 0.0]},
+            "joints": [{"axis": [0.0, 0.0, 1.0], "origin": [0.0, 0.0, 0.0], "radius": radius}],
+            "tip": direction, "q": [0.0]}
+
+
+@pytest.mark.parametrize(("corner", "radial"), [((0.5, 0.5, 1.0), (1, 1, 1)), ((-0.5, 0.5, 1.0), (-1, 1, 1))])
+def test_box_corner_against_a_link(corner: tuple[float, ...], radial: tuple[int, ...]) -> None:
+    """A capsule (radius 0.05) whose axis passes 0.05 from a top corner along the corner's
+    diagonal ``radial``, perpendicular to it: the contact normal is the capsule's radial direction
+    -radial/sqrt(3), inside the corner's cone (the three face normals). A normal along a face
+    diagonal is in the corner's cone too but 35.26 deg off the capsule's: refused by the link."""
+    r = 0.05
+    d = np.asarray(radial, dtype=float) / np.sqrt(3)
+    axis = np.array([d[1], -d[0], 0.0]) / np.linalg.norm(d[:2])  # perpendicular to the diagonal
+    centre = np.asarray(corner) + r * d
+    finger = _link("arm", (centre - 0.5 * axis).tolist(), axis.tolist(), r)
+    contact = {"body": "arm/0", "point": list(corner), "normal": (-d).tolist(), "mu": 0.5}
+    scene = scene_from_dict(_cube_scene([_table_contact(0.0, 0.0), contact], fingers=[finger]))
+    assert scene.contacts[1].normal == pytest.approx((-d).tolist(), abs=1e-15)
+    face_diagonal = -np.array([d[0], d[1], 0.0]) / np.linalg.norm(d[:2])
+    contact["normal"] = face_diagonal.tolist()
+    _expect_error(_cube_scene([_table_contact(0.0, 0.0), contact], fingers=[finger]), ("contacts", 1, "normal"),
+                  "must point out of body 'arm/0'", "35.3 deg off the surface normal of body 'arm/0'")
+
+
+def test_box_edge_across_a_link() -> None:
+    """A forearm (capsule, radius 0.04) across the top edge x = 0.5, z = 1 of the cube, its axis
+    along (1, 0, -1)/sqrt(2) and 0.04 from the edge along (1, 0, 1)/sqrt(2): an edge-link contact
+    with the normal -(1, 0, 1)/sqrt(2). The same contact with the top face's normal is in the
+    edge's cone but not the capsule's (45 deg off)."""
+    r = 0.04
+    n_out = np.array([1.0, 0.0, 1.0]) / np.sqrt(2)
+    axis = np.array([1.0, 0.0, -1.0]) / np.sqrt(2)
+    edge_point = np.array([0.5, 0.1, 1.0])
+    finger = _link("forearm", (edge_point + r * n_out - 0.5 * axis).tolist(), axis.tolist(), r)
+    contact = {"body": "forearm/0", "point": edge_point.tolist(), "normal": (-n_out).tolist(), "mu": 0.5}
+    assert len(scene_from_dict(_cube_scene([contact], fingers=[finger])).contacts) == 1
+    contact["normal"] = [0.0, 0.0, -1.0]
+    _expect_error(_cube_scene([contact], fingers=[finger]), ("contacts", 0, "normal"),
+                  "45 deg off the surface normal of body 'forearm/0'")
 
 
 def test_point_off_its_link(planar: dict[str, Any], spatial: dict[str, Any]) -> None:
@@ -463,12 +595,19 @@ def test_zero_mu_is_accepted(planar: dict[str, Any]) -> None:
     assert scene_from_dict(planar).contacts[3].mu == 0.0
 
 
-def test_too_many_contacts(planar: dict[str, Any]) -> None:
+def test_the_contact_cap_applies_to_full_enumeration_only(planar: dict[str, Any]) -> None:
     contacts = planar["contacts"]
     planar["contacts"] = [copy.deepcopy(contacts[i % len(contacts)]) for i in range(MAX_CONTACTS)]
-    assert len(scene_from_dict(planar).contacts) == MAX_CONTACTS  # the limit itself is fine
-    planar["contacts"].append(copy.deepcopy(contacts[0]))
-    _expect_error(planar, ("contacts",), f"has {MAX_CONTACTS + 1} contacts", f"limit is {MAX_CONTACTS}")
+    check_enumerable(scene_from_dict(planar))  # the limit itself is fine
+    for L in (MAX_CONTACTS + 1, 32, 40):
+        planar["contacts"] = [copy.deepcopy(contacts[i % len(contacts)]) for i in range(L)]
+        scene = scene_from_dict(planar)  # any number of contacts loads
+        assert len(scene.contacts) == L
+        with pytest.raises(SceneError) as info:
+            check_enumerable(scene)
+        assert info.value.loc == ("contacts",)
+        assert str(info.value).startswith(f"contacts: has {L} contacts")
+        assert f"limited to {MAX_CONTACTS} contacts" in str(info.value)
 
 
 def test_no_contacts(planar: dict[str, Any]) -> None:

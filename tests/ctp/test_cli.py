@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 from closure_helpers import PLANAR, example_system
+from cube_planes import cube_in_planes
 from typer.testing import CliRunner
 
 from analysis.combination import CombinationParts, summarize
@@ -103,6 +104,34 @@ def test_unparsable_scene_and_bad_options_exit_2(tmp_path: Path) -> None:
     assert runner.invoke(app, ["analyze", str(PLANAR), "--combination", "FDFDD", "--nu", "2"]).exit_code == 2
     assert runner.invoke(app, ["analyze", str(PLANAR), "--combination", "FDFDD", "--direction", "1,0"]).exit_code == 2
     assert runner.invoke(app, ["analyze", str(PLANAR), "--direction", "1,0,0"]).exit_code == 2
+
+
+def test_modes_takes_twenty_contacts_and_full_enumeration_refuses_them(tmp_path: Path) -> None:
+    """The cube in a corner of five planes (20 vertex-face contacts): 2 contacting/separating
+    modes (Huang, Cheng & Mason 2020); one combination is analysed; the table of all 3^20 is
+    refused naming ``contacts``."""
+    path = tmp_path / "cube5.json"
+    path.write_text(json.dumps(cube_in_planes(5)))
+    result = runner.invoke(app, ["modes", str(path), "--json", str(tmp_path / "modes.json")])
+    assert result.exit_code == 0, result.output
+    assert "2 contacting/separating modes" in result.stdout
+    assert json.loads((tmp_path / "modes.json").read_text())["contacting_separating"] == 2
+    result = runner.invoke(app, ["analyze", str(path), "--combination", "F" * 4 + "D" * 16])
+    assert result.exit_code == 0, result.output
+    assert "not feasible" in result.stdout and "motion space a = 0, object part a~ = 0" in result.stdout
+    result = runner.invoke(app, ["analyze", str(path)])
+    assert result.exit_code == 2
+    assert "contacts: has 20 contacts" in _stderr(result) and "limited to 16" in _stderr(result)
+
+
+def test_a_normal_off_unit_length_is_normalised_with_a_note(tmp_path: Path) -> None:
+    data = json.loads(PLANAR.read_text())
+    data["contacts"][4]["normal"] = [0.0, 1.0005]
+    path = tmp_path / "off.json"
+    path.write_text(json.dumps(data))
+    result = runner.invoke(app, ["analyze", str(path), "--combination", "FDFDD"])
+    assert result.exit_code == 0, result.output
+    assert "note:" in _stderr(result) and "contacts.4.normal: norm 1.0005 normalised to unit length" in _stderr(result)
 
 
 def test_schema_prints_json_schema(tmp_path: Path) -> None:
