@@ -14,14 +14,20 @@ import numpy as np
 
 from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection, selection
-from analysis.dafc import SEMANTICS, DAFCOracle, DAFCSet, DirectionTest, dafc_nonempty, dafc_set
+from analysis.dafc import SEMANTICS, DAFCOracle, DAFCSet, DirectionTest, dafc_nonempty, dafc_set, default_samples
 from analysis.dpfc import DPFC, dpfc
 from analysis.exceptions import CTPError, NoStationaryGrasp
 from analysis.friction import FrictionSet, friction_set, kinetic_friction
 from analysis.motion import MotionSpace, motion_space
 from analysis.regrasp import RegraspCone, regrasp_cone
 from analysis.statics import Statics, statics
-from analysis.stationary import StationaryGrasp, min_total_normal, stationary_grasps
+from analysis.stationary import (
+    DEGENERATE_TOL,
+    StationaryGrasp,
+    min_total_normal,
+    stationary_grasps,
+    stationary_violation,
+)
 from analysis.torques import FrictionUncertainty, TorqueSet, friction_uncertainty, realisable_direction, torque_set
 
 
@@ -104,10 +110,13 @@ class CombinationReport:
     direction_test: DirectionTest | None
     uncertainty: FrictionUncertainty | None
     regrasp: RegraspCone | None
+    notes: tuple[str, ...] = ()  # degeneracies and tolerances worth a user's attention
 
     def to_json(self) -> dict[str, Any]:
         ms, st = self.parts.ms, self.parts.st
         out: dict[str, Any] = self.summary.to_json()
+        out["notes"] = list(self.notes)
+        out["scales"] = {"force": self.parts.system.scales.force, "length": self.parts.system.scales.length}
         out["semantics"] = SEMANTICS
         out["motion_space"] = {
             "a": ms.a,
@@ -137,9 +146,16 @@ class CombinationReport:
                 },
             }
         if self.dpfc is not None:
-            out["dpfc"] = {"dim": self.dpfc.dim, "vertices": _list(self.dpfc.vertices),
-                           "rays": _list(self.dpfc.generators.rays),
-                           "lines": _list(self.dpfc.generators.lines)}
+            dp = self.dpfc
+            out["dpfc"] = {"dim": dp.dim, "enumerated": dp.enumerated, "vertices": _list(dp.vertices),
+                           "rays": _list(dp.generators.rays), "lines": _list(dp.generators.lines)}
+            if not dp.enumerated:
+                assert dp.A_xi is not None and dp.b_xi is not None and dp.W_xi is not None
+                out["dpfc"]["description"] = {
+                    "definition": "DPFC = {W_xi @ xi : A_xi @ xi <= b_xi}; 'vertices' are its extreme wrenches "
+                    "along +- each axis of its span (not every vertex)",
+                    "A_xi": _list(dp.A_xi), "b_xi": _list(dp.b_xi), "W_xi": _list(dp.W_xi),
+                    "unbounded_axes": dp.unbounded_axes}
         if self.direction_test is not None:
             t = self.direction_test
             out["direction_test"] = {"direction": _list(t.direction), "member": t.member, "reason": t.reason,
@@ -243,8 +259,27 @@ def analyze_combination(
     summary = summarize(parts, stationary_known=grasp is not None)
     oracle = parts.oracle()
     if samples is None:  # the circle/sphere densely, higher-dimensional motion spaces coarsely
-        samples = 120 if ms.a_bar <= 3 else 48
+        samples = default_samples(ms.a_bar)
     dset = dafc_set(oracle, samples=samples) if ms.a_bar else None
+    notes: list[str] = []
+    if grasp is None and ms.a_bar:
+        t_star = stationary_violation(sy, st, fs)
+        if t_star is not None and t_star <= DEGENERATE_TOL:
+            notes.append(f"degenerate: the contacts would hold the object if the friction rows could be violated by "
+                         f"{t_star:.1e} x the force scale ({sy.scales.force:.4g} N); a perturbation of the contact "
+                         "data of that size may change this verdict")
+    if grasp is not None and not summary.feasible and summary.reason == "DAFC is empty":
+        # any tested member decides: DAFC is not empty (the sampled set or the user's direction)
+        found = [t for t in (dset.tests if dset is not None else ()) if t.member]
+        if direction is not None:
+            probe = oracle.test(np.asarray(direction, dtype=float))
+            found = found + ([probe] if probe.member else [])
+        if found:
+            members = np.array([t.u for t in found])
+            summary = CombinationSummary(summary.combination, True, "feasible", ms.a, ms.a_bar,
+                                         int(np.linalg.matrix_rank(members, tol=1e-6)), st.p, False,
+                                         found[0].direction)
+            notes.append("DAFC found non-empty by a direction the table's search did not test")
     dp = dpfc(st, fs, grasp) if grasp is not None else None
     rg = regrasp_cone(sy, sel, ms, st, fs) if grasp is not None else None
     torque: TorqueSet | None = None
@@ -274,4 +309,4 @@ def analyze_combination(
         err = "no stationary grasp (18): the torque set is not defined"
     if torque is not None and nu is not None:
         unc = friction_uncertainty(sy, sel, st, fs, torque, nu)
-    return CombinationReport(summary, parts, grasp, grasp_min, dset, dp, torque, err, dtest, unc, rg)
+    return CombinationReport(summary, parts, grasp, grasp_min, dset, dp, torque, err, dtest, unc, rg, tuple(notes))

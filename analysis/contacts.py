@@ -19,8 +19,9 @@ from numpy.typing import NDArray
 from analysis._types import Array
 from analysis.exceptions import CombinationError
 from analysis.friction_cone import friction_pyramid
-from analysis.geometry import object_origin
+from analysis.geometry import object_origin, object_size
 from analysis.kinematics import BodyRef, HandKinematics
+from analysis.scales import Scales, grasp_scales
 from analysis.scene import Scene
 
 STATES = "FNSD"
@@ -72,6 +73,7 @@ class GraspSystem:
     G_blocks: Array  # (L, D, d)
     friction_sides: int = 16
     contact_names: tuple[str, ...] = field(default=())
+    object_size: float = 0.0  # the object's characteristic size [m]; 0: unknown (lever arms used)
 
     def __post_init__(self) -> None:
         L, d = self.points.shape
@@ -128,6 +130,11 @@ class GraspSystem:
             facets[i], gens[i] = friction_pyramid(self.normals[i], self.tangents[i], self.mu[i], d, k)
         return facets, gens
 
+    @cached_property
+    def scales(self) -> Scales:
+        """Force and length scales in which the LPs are posed and certified (:mod:`analysis.scales`)."""
+        return grasp_scales(self.dim, self.w_ex, self.points - self.p_o, self.object_size or None)
+
     def frictional(self) -> NDArray[np.bool_]:
         return self.mu > 0.0
 
@@ -143,6 +150,7 @@ def system_from_arrays(
     bodies: tuple[BodyRef, ...] | None = None,
     friction_sides: int = 16,
     contact_names: tuple[str, ...] = (),
+    object_size: float = 0.0,
 ) -> GraspSystem:
     """A :class:`GraspSystem` from contact points ``(L, d)``, normals ``(L, d)`` (normalised here)
     and point Jacobians ``(L, d, M)`` (default: contacts on fixed bodies, ``M = 0``); builds the
@@ -168,6 +176,7 @@ def system_from_arrays(
         G_blocks=np.array([grasp_block(p, p_o) for p in points]).reshape(L, D, d),
         friction_sides=friction_sides,
         contact_names=contact_names,
+        object_size=float(object_size),
     )
 
 
@@ -197,6 +206,7 @@ def build_system(scene: Scene, hand: HandKinematics | None = None, q: Array | No
         bodies=tuple(bodies),
         friction_sides=scene.friction_cone_sides,
         contact_names=tuple(c.body for c in scene.contacts),
+        object_size=object_size(scene),
     )
 
 

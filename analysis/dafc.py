@@ -32,20 +32,21 @@ from analysis.exceptions import SolverError
 from analysis.friction import FrictionSet, kinetic_friction
 from analysis.linalg import rank
 from analysis.motion import MotionSpace
+from analysis.scales import FORCE_TOL, GRIP_BOUND
 from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators
 from analysis.solvers.highs import LPModel, solve_lp
 from analysis.statics import Statics
 from analysis.torque_conditions import torque_conditions
 
-#: Relative tolerance on "positive work" and on non-penetration.
-WORK_TOL = 1e-9
+#: Relative tolerance on non-penetration (positive work: :mod:`analysis.scales`).
 ALLOW_TOL = 1e-9
 #: An S-point "really slides" when its slip exceeds this fraction of the motion size.
 SLIP_TOL = 1e-7
 
 SEMANTICS: dict[str, str] = {
     "dafc_unknowns": "total contact forces f_c; membership does not depend on the stationary solution",
-    "dafc_scale": "scale-free: member iff the supremum of the work is positive (possibly unbounded)",
+    "dafc_scale": "member iff admissible forces with a total normal force of at most 1000 x the force scale "
+    "(|w_ex|) do positive work above 1e-6 x the force scale per unit motion (moments per object size)",
     "dafc_redundancy": "existential over the finger redundancy dzeta~_r; the torque problem (31) then "
     "picks the motion minimising phi = |dq|",
     "dafc_w3": "DAFC has no W_3 condition; the torque set (30)-(32) does",
@@ -158,11 +159,16 @@ class DAFCOracle:
                     r[cols] = c
                     r[col_n] = -mu
                     rows.append(r[None, :])
-            self._G_relaxed = np.hstack([st.G_c, G_S])  # (D, n_var)
+            self._G_relaxed = np.hstack([st.G_c, G_S])  # (D, n_var), unknowns in units of F0
+            grip = np.zeros(n_var)
+            grip[:L_c] = fs.N.sum(axis=0)
+            rows.append(grip[None, :])
             A_eq = np.vstack([self.Xi.T @ self._G_relaxed, *[e[None, :] for e in eq_rows]])
-            b_eq = np.concatenate([-(self.Xi.T @ sy.w_ex), np.zeros(len(eq_rows))])
+            b_eq = np.concatenate([-(self.Xi.T @ sy.w_ex) / sy.scales.force, np.zeros(len(eq_rows))])
             A_ub = np.vstack(rows)
-            self._relaxed = LPModel(n_var, A_ub=A_ub, b_ub=np.zeros(A_ub.shape[0]), A_eq=A_eq, b_eq=b_eq)
+            b_ub = np.zeros(A_ub.shape[0])
+            b_ub[-1] = GRIP_BOUND
+            self._relaxed = LPModel(n_var, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq)
         return self._relaxed
 
     def relaxed_work_sup(self, dr: Array) -> float:
@@ -170,12 +176,12 @@ class DAFCOracle:
         model = self._relaxed_model()
         res = model.solve(self._G_relaxed.T @ dr, maximize=True)
         self.lp_count += 1
-        if res.status == "unbounded":
-            return np.inf
         if res.status == "infeasible":
             return -np.inf
+        if res.status != "optimal":  # the grip bound bounds every force
+            raise SolverError("HiGHS", f"relaxed DAFC LP ended '{res.status}' although its forces are bounded")
         assert res.objective is not None
-        return float(res.objective + dr @ self.system.w_ex)
+        return float(res.objective * self.system.scales.force + dr @ self.system.w_ex)
 
     def _force_lp(self) -> LPModel:
         """The force LP of (22), built once per combination: friction rows and the passive
@@ -186,10 +192,10 @@ class DAFCOracle:
             st, fs = self.st, self.fs
             self._lp = LPModel(
                 st.G_c.shape[1],
-                A_ub=fs.C,
-                b_ub=np.zeros(fs.C.shape[0]),
+                A_ub=np.vstack([fs.C, fs.N.sum(axis=0)[None, :]]),
+                b_ub=np.r_[np.zeros(fs.C.shape[0]), GRIP_BOUND],
                 A_eq=self.Xi.T @ st.G_c,
-                b_eq=-(self.Xi.T @ self.system.w_ex),
+                b_eq=-(self.Xi.T @ self.system.w_ex) / self.system.scales.force,
             )
         return self._lp
 
@@ -214,28 +220,31 @@ class DAFCOracle:
             return float(dr @ w_ex), np.zeros(0)
         res = model.solve(G_eff.T @ dr, maximize=True)
         self.lp_count += 1
-        if res.status == "unbounded":
-            return np.inf, self._witness(G_eff, dr) if witness else None
         if res.status == "infeasible":
             return -np.inf, None
-        assert res.objective is not None
-        return float(res.objective + dr @ w_ex), res.x
+        if res.status != "optimal":  # the grip bound bounds every force
+            raise SolverError("HiGHS", f"DAFC force LP ended '{res.status}' although its forces are bounded")
+        assert res.objective is not None and res.x is not None
+        f = res.x * self.system.scales.force
+        return float(G_eff.T @ dr @ f + dr @ w_ex), f
 
-    def _witness(self, G_eff: Array, dr: Array) -> Array | None:
-        """Forces with work exactly ``1 + |w_ex|`` when the supremum is unbounded (a certificate)."""
-        fs = self.fs
-        w_ex = self.system.w_ex
-        c = G_eff.T @ dr
-        target = 1.0 + float(np.linalg.norm(w_ex)) - float(dr @ w_ex)
-        try:
-            res = solve_lp(np.zeros(len(c)), A_ub=fs.C, b_ub=np.zeros(fs.C.shape[0]),
-                           A_eq=np.vstack([self.Xi.T @ G_eff, c[None, :]]),
-                           b_eq=np.concatenate([-(self.Xi.T @ w_ex), [target]]))
-        except SolverError:
-            # The membership is already decided (the main LP proved the work unbounded); only the
-            # optional certificate forces are missing, which DirectionTest allows (forces=None).
-            return None
-        return res.x if res.found else None
+    def certify(self, t: DirectionTest) -> bool:
+        """Re-check a member in newtons: its forces lie in the friction set, satisfy the passive
+        equalities ``Xi^T w = 0`` (W_2) and the grip bound, and do positive work along ``dr``."""
+        if not t.member or t.forces is None or t.zeta_c is None:
+            return False
+        sy, st, fs = self.system, self.st, self.fs
+        sc = sy.scales
+        f = t.forces
+        G_eff = st.G_c
+        if self.sel.s_index:
+            G_eff = G_eff + kinetic_friction(sy, self.sel, self.slips_of(t.zeta_c)).G_w
+        w = (G_eff @ f if f.size else np.zeros(sy.D)) + sy.w_ex
+        passive = float(np.max(np.abs(self.Xi.T @ w), initial=0.0)) / sc.force
+        friction = float(np.max(fs.C @ f, initial=0.0)) / sc.force if fs.C.shape[0] else 0.0
+        grip = float(fs.N.sum(axis=0) @ f) if f.size else 0.0
+        return bool(passive <= FORCE_TOL * (1.0 + sc.length) and friction <= FORCE_TOL
+                    and grip <= sc.grip_bound * (1.0 + FORCE_TOL) and float(t.direction @ w) > sc.work_tol(t.direction))
 
     def realisable(self, t: DirectionTest) -> bool:
         """Has the member ``t`` a non-empty torque set (32) for its tested motion ``t.zeta_c``?
@@ -252,7 +261,7 @@ class DAFCOracle:
         sy = self.system
         tc = torque_conditions(sy, self.sel, self.ms, self.st, self.fs, t.u,
                                self.slips_of(t.zeta_c) if self.sel.s_index else None)
-        tol = WORK_TOL * (1.0 + float(np.linalg.norm(sy.w_ex)))
+        tol = sy.scales.work_tol(self.ms.Lambda_r_t @ t.u)
         if tc.L_c == 0:  # no forces: the external wrench alone must do it
             return bool(tc.work0 > tol and np.all(np.abs(tc.b_eq) <= tol))
         try:
@@ -289,8 +298,8 @@ class DAFCOracle:
             return DirectionTest(dr, u, None, False, np.nan, "direction is outside the motion space", True)
         u = u / nu
         dr = ms.Lambda_r_t @ u
-        scale = 1.0 + float(np.linalg.norm(self.system.w_ex))
-        if screen and self.sel.s_index and zeta_r is None and self.relaxed_work_sup(dr) <= WORK_TOL * scale:
+        sc = self.system.scales
+        if screen and self.sel.s_index and zeta_r is None and self.relaxed_work_sup(dr) <= sc.work_tol(dr):
             return DirectionTest(dr, u, None, False, np.nan,
                                  "the fingers cannot do positive work, whatever the S-points' slip", True)
         candidates: list[Array] = []
@@ -324,18 +333,46 @@ class DAFCOracle:
                                          f"S-point {still[0]} does not slide for this motion", self.exact)
                     continue
             sup, f = self.work_sup(dr, zc, witness)
-            if sup > WORK_TOL * scale:
+            if sup > sc.work_tol(dr):
                 return DirectionTest(dr, u, zc, True, sup, "member", self.exact, f)
-            last = DirectionTest(dr, u, zc, False, sup, "the fingers cannot do positive work", self.exact, f)
+            why = ("the fingers cannot do positive work" if sup <= sc.work_zero(dr) else
+                   "degenerate: the largest work is positive but below the tolerance "
+                   f"({sup:.3g} <= {sc.work_tol(dr):.3g})")
+            last = DirectionTest(dr, u, zc, False, sup, why, self.exact, f)
         assert last is not None
         return last
+
+    def _aligned_allowable(self, u: Array, base: Array, Pr: Array, target: Array, scale: float) -> Array | None:
+        """The allowable redundancy whose slips come closest (L1) to the friction-aligned ones
+        ``scale * target / |target|``: ``min sum e`` s.t. ``|base + Pr z - slip*| <= e``,
+        ``B [u; z] <= 0`` (an LP, so the answer does not depend on the basis of the redundancy
+        and a mirrored scene gets the mirrored motion)."""
+        tn = float(np.linalg.norm(target))
+        nr, k = Pr.shape[1], Pr.shape[0]
+        if tn < 1e-12 or nr == 0:
+            return None
+        goal = scale * target / tn - base  # (d #S,)
+        a_bar = self.ms.a_bar
+        B_u, B_r = self.B[:, :a_bar], self.B[:, a_bar:]
+        I = np.eye(k)
+        A_ub = np.vstack([np.hstack([Pr, -I]), np.hstack([-Pr, -I]), np.hstack([B_r, np.zeros((B_r.shape[0], k))])])
+        tol = ALLOW_TOL * max(1.0, float(np.linalg.norm(u)))
+        b_ub = np.concatenate([goal, -goal, -(B_u @ u) + tol])
+        lb = np.r_[np.full(nr, -np.inf), np.zeros(k)]
+        try:
+            res = solve_lp(np.r_[np.zeros(nr), np.ones(k)], A_ub=A_ub, b_ub=b_ub, lb=lb)
+        except SolverError:
+            return None  # one candidate fewer; the others are still tried
+        self.lp_count += 1
+        return None if res.x is None else res.x[:nr]
 
     def _alternative_redundancies(self, u: Array, z0: Array, count: int = 4) -> list[Array]:
         """Alternatives to the least-L1 redundancy that stay allowable.
 
-        First the redundancy whose slips make kinetic friction drag the object along its motion
-        (slip of the object relative to the finger opposite to the object point's tangential
-        velocity, eq. 11) and its opposite, by least squares; then seeded random ones.
+        First the allowable redundancy closest to friction-aligned slips (slip of the object
+        relative to the finger opposite to the object point's tangential velocity, so kinetic
+        friction drags the object along its motion, eq. 11; an LP), then the friction-aligned
+        redundancy and its opposite by least squares, then seeded random ones.
         """
         ms, sy, sel = self.ms, self.system, self.sel
         a_bar, nr, d = ms.a_bar, ms.n_redundant, self._d
@@ -350,6 +387,9 @@ class DAFCOracle:
             target[k * d : (k + 1) * d] = -vt
         scale = max(1.0, float(np.linalg.norm(ms.Lambda_q_t @ u)))
         cands: list[Array] = []
+        aligned = self._aligned_allowable(u, base, Pr, target, scale)
+        if aligned is not None:
+            cands.append(aligned)
         for sign in (1.0, -1.0):
             tn = float(np.linalg.norm(target))
             if tn < 1e-12:
@@ -540,8 +580,9 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     if t is not None:
         return t, cone_dim, False
     # (1) relaxation: exact emptiness certificate
-    scale = 1.0 + float(np.linalg.norm(oracle.system.w_ex))
-    positive = [u for u in generators if oracle.relaxed_work_sup(ms.Lambda_r_t @ u) > WORK_TOL * scale]
+    sc = oracle.system.scales
+    positive = [u for u in generators
+                if oracle.relaxed_work_sup(ms.Lambda_r_t @ u) > sc.work_tol(ms.Lambda_r_t @ u)]
     if not positive:
         return None, 0, True
     # (2) the interior samples again with the full redundancy search, then the generators
@@ -560,8 +601,46 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
                 if best is None or ok:
                     best, best_ok = t, ok
     if best is None:
+        # (3) the directions the full report samples (:func:`dafc_set`), so that a combination the
+        # table calls empty never shows members in its own report
+        for u in sample_directions(ms, default_samples(ms.a_bar)):
+            t = oracle.test(ms.Lambda_r_t @ u, witness=False)
+            if t.member:
+                members.append(t.u)
+                best = t
+                break
+    if best is None:
         return None, 0, False
     return best, int(np.linalg.matrix_rank(np.array(members), tol=1e-6)), False
+
+
+def default_samples(a_bar: int) -> int:
+    """Directions sampled by the full report: the circle/sphere densely, higher dimensions coarsely."""
+    return 120 if a_bar <= 3 else 48
+
+
+def sample_directions(ms: MotionSpace, samples: int, seed: int = 0) -> Array:
+    """The seeded sample of unit coordinates ``(n, a_bar)`` :func:`dafc_set` tests: both
+    directions (``a_bar = 1``), a circle (2), a Fibonacci sphere (3) or Gaussian directions
+    (more), then the generators of the allowable cone."""
+    a_bar = ms.a_bar
+    rng = np.random.default_rng(seed)
+    U: Array
+    if a_bar == 1:
+        U = np.array([[1.0], [-1.0]])
+    elif a_bar == 2:
+        th = np.linspace(0, 2 * np.pi, samples, endpoint=False)
+        U = np.stack([np.cos(th), np.sin(th)], axis=1)
+    elif a_bar == 3:
+        i = np.arange(samples) + 0.5
+        phi = np.arccos(1 - 2 * i / samples)
+        lon = np.pi * (1 + 5**0.5) * i
+        U = np.stack([np.cos(lon) * np.sin(phi), np.sin(lon) * np.sin(phi), np.cos(phi)], axis=1)
+    else:
+        U = rng.standard_normal((samples, a_bar))
+        U /= np.linalg.norm(U, axis=1, keepdims=True)
+    extra = allowable_cone(ms).all_directions()
+    return np.vstack([U, extra]) if extra.size else U
 
 
 def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int = 0) -> DAFCSet:
@@ -579,24 +658,7 @@ def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int 
                                                              np.zeros((0, ms.D)))
     if a_bar == 0:
         return DAFCSet(np.zeros((0, ms.D)), np.zeros(0, bool), np.zeros(0), gen, 0, True)
-    rng = np.random.default_rng(seed)
-    U: Array
-    if a_bar == 1:
-        U = np.array([[1.0], [-1.0]])
-    elif a_bar == 2:
-        th = np.linspace(0, 2 * np.pi, samples, endpoint=False)
-        U = np.stack([np.cos(th), np.sin(th)], axis=1)
-    elif a_bar == 3:
-        i = np.arange(samples) + 0.5
-        phi = np.arccos(1 - 2 * i / samples)
-        lon = np.pi * (1 + 5**0.5) * i
-        U = np.stack([np.cos(lon) * np.sin(phi), np.sin(lon) * np.sin(phi), np.cos(phi)], axis=1)
-    else:
-        U = rng.standard_normal((samples, a_bar))
-        U /= np.linalg.norm(U, axis=1, keepdims=True)
-    extra = gen_u.all_directions()
-    if extra.size:
-        U = np.vstack([U, extra])
+    U = sample_directions(ms, samples, seed)
     tests = [oracle.test(ms.Lambda_r_t @ u, witness=False) for u in U]
     member = np.array([t.member for t in tests])
     # boundary refinement

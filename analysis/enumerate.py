@@ -7,7 +7,9 @@ Pruning, all exact:
 * stationary grasp monotonicity: the force set of a contact shrinks F -> S/N -> D (cone ->
   normal only -> nothing), so (18) infeasible for a combination is infeasible for every
   combination that downgrades any of its contacts, and a solution whose forces fit a weaker
-  pattern (zero force, or normal-only) certifies every combination at least as strong;
+  pattern (zero force, or normal-only, by the absolute thresholds of :mod:`analysis.scales`)
+  is a candidate certificate for every combination at least as strong, used only once it is
+  re-checked against that combination's eq. (18) in newtons;
 * optionally the kinematic contact modes (:mod:`analysis.modes`): a combination no object
   twist realises (F stick, S slide, D not penetrating) is skipped.
 """
@@ -17,6 +19,7 @@ from __future__ import annotations
 import itertools
 import multiprocessing as mp
 import os
+import re
 from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
@@ -26,9 +29,37 @@ import numpy as np
 from analysis._types import Array
 from analysis.combination import CombinationParts, CombinationSummary, summarize
 from analysis.contacts import GraspSystem
-from analysis.stationary import min_total_normal
+from analysis.exceptions import CombinationError
+from analysis.scales import REUSE_TOL
+from analysis.stationary import certifies, min_total_normal
 
 _CLASS = {"F": 2, "S": 1, "N": 1, "D": 0}
+
+
+_OPS: dict[str, Callable[[int, int], bool]] = {
+    ">=": lambda a, b: a >= b, "<=": lambda a, b: a <= b, "==": lambda a, b: a == b,
+    "!=": lambda a, b: a != b, ">": lambda a, b: a > b, "<": lambda a, b: a < b, "=": lambda a, b: a == b,
+}
+_WHERE = re.compile(r"^\s*([FSND])\s*(>=|<=|==|!=|=|>|<)\s*(\d+)\s*$")
+
+
+def parse_where(text: str) -> Callable[[str], bool]:
+    """A filter on letter counts, e.g. ``'D>=3'`` or ``'F<=2, S==0'`` (all must hold).
+
+    Raise :class:`CombinationError` at ``where`` naming the part that is not ``<letter><op><count>``.
+    """
+    conds: list[tuple[str, Callable[[int, int], bool], int]] = []
+    for part in re.split(r",|\band\b", text):
+        if not part.strip():
+            continue
+        m = _WHERE.match(part.upper())
+        if m is None:
+            raise CombinationError(("where",), f"'{part.strip()}' is not a condition like 'D>=3' "
+                                   "(a letter F, S, N or D, one of >= <= == != > <, a count)")
+        conds.append((m.group(1), _OPS[m.group(2)], int(m.group(3))))
+    if not conds:
+        raise CombinationError(("where",), "is empty: give conditions like 'D>=3' or 'F<=2, S==0'")
+    return lambda c: all(op(c.count(letter), k) for letter, op, k in conds)
 
 
 @dataclass
@@ -39,41 +70,82 @@ class EnumerationStats:
     pruned_modes: int = 0
     stationary_lps: int = 0
     dafc_lps: int = 0
+    stopped_at_limit: bool = False  # the enumeration stopped after ``limit`` feasible combinations
 
 
 class _StationaryCache:
-    """Monotone memory of stationary-grasp feasibility over force classes (F=2, S/N=1, D=0)."""
+    """Monotone memory of stationary-grasp feasibility over force classes (F=2, S/N=1, D=0).
+
+    An infeasible combination makes every combination it dominates infeasible (their force sets
+    are subsets). A feasible one leaves its certificate: the contact forces ``(L, d)`` in newtons
+    and the weakest class each contact needs (zero force -> 0, normal only -> 1, else 2, with the
+    absolute thresholds of :mod:`analysis.scales`). A cached certificate answers for another
+    combination only after it is re-checked against that combination's eq. (18) in physical units
+    (:func:`analysis.stationary.certifies`).
+    """
 
     def __init__(self, L: int) -> None:
         self.infeasible = np.zeros((0, L), dtype=np.int8)  # (k, L)
         self.witnesses = np.zeros((0, L), dtype=np.int8)  # (k, L)
+        self.forces: list[Array] = []  # per witness, (L, d) contact forces [N]
 
-    def known(self, cls: tuple[int, ...]) -> bool | None:
+    def candidates(self, cls: tuple[int, ...]) -> list[Array]:
+        """Cached certificates whose classes fit the combination with classes ``cls``."""
+        if not self.witnesses.shape[0]:
+            return []
         c = np.asarray(cls, dtype=np.int8)
-        if self.witnesses.shape[0] and bool(np.any(np.all(c >= self.witnesses, axis=1))):
-            return True
-        if self.infeasible.shape[0] and bool(np.any(np.all(c <= self.infeasible, axis=1))):
-            return False
-        return None
+        return [self.forces[k] for k in np.flatnonzero(np.all(c >= self.witnesses, axis=1))[:4]]
 
-    def add(self, cls: tuple[int, ...], witness: tuple[int, ...] | None) -> None:
-        if witness is None:
-            self.infeasible = np.vstack([self.infeasible, np.asarray(cls, dtype=np.int8)])
-        else:
-            self.witnesses = np.vstack([self.witnesses, np.asarray(witness, dtype=np.int8)])
+    def infeasible_for(self, cls: tuple[int, ...]) -> bool:
+        c = np.asarray(cls, dtype=np.int8)
+        return bool(self.infeasible.shape[0] and np.any(np.all(c <= self.infeasible, axis=1)))
+
+    def add_infeasible(self, cls: tuple[int, ...]) -> None:
+        self.infeasible = np.vstack([self.infeasible, np.asarray(cls, dtype=np.int8)])
+
+    def add_witness(self, parts: CombinationParts, f_c: Array) -> None:
+        forces = _contact_forces(parts, f_c)
+        self.witnesses = np.vstack([self.witnesses, np.asarray(_witness_classes(parts, forces), dtype=np.int8)])
+        self.forces.append(forces)
 
 
-def _witness_classes(parts: CombinationParts, f_c: Array) -> tuple[int, ...]:
-    """Weakest force class of each contact that the solution ``f_c`` still satisfies."""
+def _contact_forces(parts: CombinationParts, f_c: Array) -> Array:
+    """The force on the object at every contact, ``(L, d)`` world frame [N] (zero at D-points)."""
     sy, sel = parts.system, parts.sel
-    out = []
-    scale = max(1e-12, float(np.max(np.abs(f_c), initial=0.0)))
+    out = np.zeros((sy.L, sy.d))
+    for i, s in enumerate(sel.combination):
+        f = f_c[sel.c_slices[i]]
+        if s == "F":
+            out[i] = f
+        elif s in "SN":
+            out[i] = float(f[0]) * sy.normals[i]
+    return out
+
+
+def _selected_forces(parts: CombinationParts, forces: Array) -> Array:
+    """``f_c`` of the combination of ``parts`` from contact forces ``(L, d)``."""
+    sy, sel = parts.system, parts.sel
+    out = np.zeros(sel.L_c)
     for i, s in enumerate(sel.combination):
         sl = sel.c_slices[i]
-        f = f_c[sl]
-        if s == "D" or float(np.max(np.abs(f), initial=0.0)) <= 1e-9 * scale:
+        if s == "F":
+            out[sl] = forces[i]
+        elif s in "SN":
+            out[sl] = forces[i] @ sy.normals[i]
+    return out
+
+
+def _witness_classes(parts: CombinationParts, forces: Array) -> tuple[int, ...]:
+    """Weakest force class of each contact that the contact forces ``(L, d)`` still satisfy:
+    0 when the force is at most ``ZERO_FORCE F0``, 1 when its tangential part is, else 2."""
+    sy = parts.system
+    zero = sy.scales.zero_force
+    out = []
+    for i in range(sy.L):
+        f = forces[i]
+        if float(np.linalg.norm(f)) <= zero:
             out.append(0)
-        elif s == "F" and np.linalg.norm(f - (f @ sy.normals[i]) * sy.normals[i]) > 1e-9 * scale:
+        elif np.linalg.norm(f - (f @ sy.normals[i]) * sy.normals[i]) > zero:
             out.append(2)
         else:
             out.append(1)
@@ -109,6 +181,8 @@ def enumerate_combinations(
     admissible: Callable[[str], bool] | None = None,
     progress: Callable[[int, int], None] | None = None,
     workers: int | None = None,
+    where: Callable[[str], bool] | None = None,
+    limit: int | None = None,
 ) -> tuple[list[CombinationSummary], EnumerationStats]:
     """Summaries of every combination (scene order of letters), strongest-first evaluation.
 
@@ -116,13 +190,22 @@ def enumerate_combinations(
     Results are returned in the canonical product order (F/S/D or N/D per contact).
     ``workers``: processes for large enumerations (default: all cores above
     ``PARALLEL_THRESHOLD`` combinations, else 1); each worker keeps its own pruning memory.
+    ``where`` (:func:`parse_where`) keeps only the combinations it accepts; ``limit`` stops after
+    that many feasible combinations (one process, strongest first) and returns the rows decided so
+    far, with ``stats.stopped_at_limit``.
     """
     letters = ["FSD" if m > 0 else "ND" for m in system.mu]
     canonical = ["".join(p) for p in itertools.product(*letters)] if combinations is None else list(combinations)
+    if where is not None:
+        canonical = [c for c in canonical if where(c)]
+    if limit is not None:
+        if limit < 1:
+            raise CombinationError(("limit",), f"{limit} must be at least 1")
+        workers = 1
     if workers is None:
         workers = (os.cpu_count() or 1) if len(canonical) > PARALLEL_THRESHOLD else 1
     if workers <= 1:
-        return _enumerate_serial(system, canonical, admissible, progress)
+        return _enumerate_serial(system, canonical, admissible, progress, limit)
     ordered = _order(canonical)
     n_chunks = max(workers * 2, 1)
     chunks = [ordered[k::n_chunks] for k in range(n_chunks)]  # interleaved: similar strength mix
@@ -148,8 +231,10 @@ def _enumerate_serial(
     canonical: list[str],
     admissible: Callable[[str], bool] | None,
     progress: Callable[[int, int], None] | None,
+    limit: int | None = None,
 ) -> tuple[list[CombinationSummary], EnumerationStats]:
     stats = EnumerationStats(combinations=len(canonical))
+    feasible = 0
     cache = _StationaryCache(system.L)
     results: dict[str, CombinationSummary] = {}
     ordered = _order(canonical)
@@ -168,16 +253,26 @@ def _enumerate_serial(
                                             ms.a, ms.a_bar, 0, st.p, True, None)
             continue
         cls = tuple(_CLASS[s] for s in c)
-        known = cache.known(cls)
+        known: bool | None = False if cache.infeasible_for(cls) else None
+        if known is None and any(certifies(system, st, parts.fs, _selected_forces(parts, f), REUSE_TOL)
+                                 for f in cache.candidates(cls)):
+            known = True
         if known is None:
             stats.stationary_lps += 1
             found = min_total_normal(system, st, parts.fs)
-            cache.add(cls, None if found is None else _witness_classes(parts, found[1]))
+            if found is None:
+                cache.add_infeasible(cls)
+            else:
+                cache.add_witness(parts, found[1])
             known = found is not None
         else:
             stats.pruned_stationary += 1
         summary = summarize(parts, stationary_known=known)
         results[c] = summary
+        feasible += summary.feasible
+        if limit is not None and feasible >= limit:
+            stats.stopped_at_limit = k + 1 < len(ordered)
+            break
     if progress is not None:
         progress(len(ordered), len(ordered))
-    return [results[c] for c in canonical], stats
+    return [results[c] for c in canonical if c in results], stats

@@ -10,8 +10,13 @@ Two members are offered:
 * ``"min_grip"``: the least total normal force (an LP);
 * ``"interior"`` (default): the most interior one, maximising the smallest distance ``s`` of
   ``f_c`` to the friction-set facets (rows of unit norm) and to ``n_f = 0`` at every loaded
-  contact, with the total normal force at most ``2 N*`` (twice the minimum grip; ``1`` when
+  contact, with the total normal force at most ``2 N*`` (twice the minimum grip; ``F0`` when
   ``N* = 0``) so that the margin is not bought by squeezing without bound.
+
+Both are posed in the scales of :mod:`analysis.scales` (unknowns ``f_c / F0``, equilibrium rows
+in units of ``F0`` and ``F0 l``), bounded by a total normal force of ``GRIP_BOUND F0``, and
+re-checked in newtons before they are returned: a verdict "the contacts hold the object" always
+comes with forces that satisfy (18) to ``FORCE_TOL F0``.
 """
 
 from __future__ import annotations
@@ -25,7 +30,8 @@ from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
 from analysis.exceptions import NoStationaryGrasp, SolverError
 from analysis.friction import FrictionSet
-from analysis.solvers.highs import solve_lp
+from analysis.scales import FORCE_TOL, GRIP_BOUND
+from analysis.solvers.highs import LPModel, solve_lp
 from analysis.statics import Statics
 
 Kind = Literal["interior", "min_grip"]
@@ -61,17 +67,82 @@ def _normal_rows(fs: FrictionSet) -> Array:
     return fs.N[keep]
 
 
+def stationary_residuals(system: GraspSystem, st: Statics, fs: FrictionSet, f_c: Array) -> tuple[float, float]:
+    """``(equilibrium error, friction violation)`` of contact forces ``f_c`` in units of ``F0``:
+    the largest component of ``G_c f_c + w_ex`` in ``(f / F0, m / (F0 l))`` and ``max(C f_c) / F0``
+    (the rows of ``C`` have unit norm, so a violation is a force)."""
+    sc = system.scales
+    eq = sc.wrench_error(st.G_c @ f_c + system.w_ex) if st.G_c.shape[1] else sc.wrench_error(system.w_ex)
+    fr = float(np.max(fs.C @ f_c, initial=0.0)) / sc.force if fs.C.shape[0] else 0.0
+    return eq, max(fr, 0.0)
+
+
+def certifies(system: GraspSystem, st: Statics, fs: FrictionSet, f_c: Array, tol: float = FORCE_TOL) -> bool:
+    """Do the forces ``f_c`` solve (18) within ``tol * F0`` and the grip bound?"""
+    eq, fr = stationary_residuals(system, st, fs, f_c)
+    total = float((_normal_rows(fs) @ f_c).sum()) if f_c.size else 0.0
+    return bool(eq <= tol and fr <= tol and total <= system.scales.grip_bound * (1 + tol))
+
+
+def _equilibrium(system: GraspSystem, st: Statics) -> tuple[Array, Array]:
+    """``G_c f = -w_ex`` in the scaled unknowns ``g = f / F0``, rows in units of F0 (forces) and
+    ``F0 l`` (moments): ``(A_eq (D, L_c), b_eq (D,))``."""
+    sc = system.scales
+    rows = sc.wrench_weights() * sc.force  # 1 on force rows, 1/l on moment rows
+    return rows[:, None] * st.G_c, -(rows * system.w_ex) / sc.force
+
+
 def min_total_normal(system: GraspSystem, st: Statics, fs: FrictionSet) -> tuple[float, Array] | None:
-    """``N* = min sum n_f`` subject to (18); ``None`` when (18) has no solution."""
+    """``N* = min sum n_f`` subject to (18) and ``sum n_f <= GRIP_BOUND F0``; ``None`` when no such
+    forces exist. The LP is posed in the scaled unknowns ``f / F0`` with equilibrated rows, and its
+    solution is re-checked in newtons (:func:`certifies`); a solution that fails the check is
+    solved once more from scratch, then raised as :class:`SolverError`."""
     L_c = st.G_c.shape[1]
+    sc = system.scales
     if L_c == 0:
-        return (0.0, np.zeros(0)) if np.allclose(system.w_ex, 0.0) else None
-    Nr = _normal_rows(fs)
-    res = solve_lp(Nr.sum(axis=0), A_ub=fs.C, b_ub=np.zeros(fs.C.shape[0]), A_eq=st.G_c, b_eq=-system.w_ex)
-    if res.status != "optimal":
+        return (0.0, np.zeros(0)) if sc.wrench_error(system.w_ex) <= FORCE_TOL else None
+    n_sum = _normal_rows(fs).sum(axis=0)  # (L_c,)
+    A_eq, b_eq = _equilibrium(system, st)
+    A_ub = np.vstack([fs.C, n_sum[None, :]])
+    b_ub = np.r_[np.zeros(fs.C.shape[0]), GRIP_BOUND]
+    for attempt in range(2):
+        model = LPModel(L_c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq)
+        if attempt:
+            model.use_defaults()
+        res = model.solve(n_sum)
+        if res.status != "optimal":
+            return None
+        assert res.x is not None
+        f_c = res.x * sc.force
+        if certifies(system, st, fs, f_c):
+            return float(n_sum @ f_c), f_c
+    eq, fr = stationary_residuals(system, st, fs, f_c)
+    raise SolverError("HiGHS", f"stationary grasp LP: its solution fails the residual check in physical "
+                      f"units (equilibrium {eq:.2e} F0, friction {fr:.2e} F0)")
+
+
+#: An infeasible (18) whose least friction violation is below this (units of F0) is degenerate.
+DEGENERATE_TOL = 1e-6
+
+
+def stationary_violation(system: GraspSystem, st: Statics, fs: FrictionSet) -> float | None:
+    """``t* = min t`` s.t. ``C f_c <= t F0``, (18) and the grip bound: how far (in units of F0) the
+    friction rows must give for the contacts to hold the object (``<= 0`` when they do);
+    ``None`` when even that cannot balance the wrench (the equilibrium itself is infeasible)."""
+    L_c = st.G_c.shape[1]
+    if L_c == 0 or fs.C.shape[0] == 0:
         return None
-    assert res.x is not None and res.objective is not None
-    return float(res.objective), res.x
+    A_eq0, b_eq = _equilibrium(system, st)
+    m = fs.C.shape[0]
+    n_sum = _normal_rows(fs).sum(axis=0)
+    A_ub = np.vstack([np.hstack([fs.C, -np.ones((m, 1))]), np.r_[n_sum, 0.0][None, :]])
+    b_ub = np.r_[np.zeros(m), GRIP_BOUND]
+    A_eq = np.hstack([A_eq0, np.zeros((A_eq0.shape[0], 1))])
+    lb = np.r_[np.full(L_c, -np.inf), -1.0]  # t >= -1: bounded below when the grasp is interior
+    res = solve_lp(np.r_[np.zeros(L_c), 1.0], A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, lb=lb)
+    if res.status != "optimal" or res.objective is None:
+        return None
+    return float(res.objective)
 
 
 def _minimum(system: GraspSystem, sel: Selection, st: Statics, fs: FrictionSet) -> tuple[float, Array]:
@@ -79,7 +150,8 @@ def _minimum(system: GraspSystem, sel: Selection, st: Statics, fs: FrictionSet) 
     if found is None:
         raise NoStationaryGrasp(
             f"combination {sel.combination}: no contact forces in the friction set balance the external "
-            "wrench (eq. 18 infeasible)"
+            f"wrench with a total normal force of at most {GRIP_BOUND:g} x {system.scales.force:.4g} N "
+            "(eq. 18 infeasible)"
         )
     return found
 
@@ -89,9 +161,10 @@ def _interior(system: GraspSystem, st: Statics, fs: FrictionSet, n_star: float, 
     L_c = st.G_c.shape[1]
     if L_c == 0:
         return _make("interior", f_min, st, fs, 0.0)
+    sc = system.scales
     Nr = _normal_rows(fs)
-    budget = 2.0 * n_star if n_star > 1e-9 else 1.0
-    # variables [f_c (L_c), s]: maximise s s.t. C f + s <= 0, -n_f + s <= 0, sum n_f <= budget
+    budget = min(2.0 * n_star / sc.force, GRIP_BOUND) if n_star > sc.zero_force else 1.0  # units of F0
+    # variables [g = f_c / F0 (L_c), s]: maximise s s.t. C g + s <= 0, -n_g + s <= 0, sum n_g <= budget
     m = fs.C.shape[0]
     A_ub = np.vstack(
         [
@@ -101,18 +174,18 @@ def _interior(system: GraspSystem, st: Statics, fs: FrictionSet, n_star: float, 
         ]
     )
     b_ub = np.concatenate([np.zeros(m + Nr.shape[0]), [budget]])
-    A_eq = np.hstack([st.G_c, np.zeros((st.G_c.shape[0], 1))])
-    res = solve_lp(
-        np.r_[np.zeros(L_c), 1.0], A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=-system.w_ex, maximize=True
-    )
+    A_eq0, b_eq = _equilibrium(system, st)
+    A_eq = np.hstack([A_eq0, np.zeros((A_eq0.shape[0], 1))])
+    res = solve_lp(np.r_[np.zeros(L_c), 1.0], A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, maximize=True)
     if res.status != "optimal":  # feasible (f_min, s = min margin) and bounded by the budget
         raise SolverError("HiGHS", f"interior stationary grasp LP ended '{res.status}'")
     assert res.x is not None
-    if res.x[-1] < 0.0:
-        # f_min with s = 0 is feasible, so a negative optimum is a numerical failure on a
-        # near-singular G_c (its point violates the friction rows): keep the minimum grip
+    f_c = res.x[:L_c] * sc.force
+    if res.x[-1] < 0.0 or not certifies(system, st, fs, f_c):
+        # f_min with s = 0 is feasible, so a negative optimum (or a point failing its residual
+        # check) is a numerical failure on a near-singular G_c: keep the certified minimum grip
         return _make("interior", f_min, st, fs, 0.0)
-    return _make("interior", res.x[:L_c], st, fs, float(res.x[-1]))
+    return _make("interior", f_c, st, fs, float(res.x[-1]) * sc.force)
 
 
 def stationary_grasp(

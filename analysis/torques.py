@@ -41,6 +41,9 @@ from analysis.torque_conditions import TorqueConditions, torque_conditions
 #: it (e.g. several 3-D F-points with 16-sided pyramids: up to k^#F vertices) T is reported by
 #: its H-representation in contact-force space and the linear map to joint torques.
 MAX_ENUMERATION_DIM = 7
+#: ... and reported by vertices and rays only when the force polyhedron has at most this many
+#: (removing the redundant ones among thousands costs one LP each: half a minute at 12 contacts).
+MAX_GENERATORS = 400
 
 
 @dataclass(frozen=True)
@@ -189,9 +192,11 @@ def _for_motion(
     dim_P = tc.L_c - (rank(A_eq) if A_eq.size else 0)
     gens: Generators | None = None
     if dim_P <= MAX_ENUMERATION_DIM:
-        gens = reduce_generators(polyhedron_generators(A_ub, b_ub, A_eq, b_eq).map(T_map))
-        if gens.is_empty:
+        raw = polyhedron_generators(A_ub, b_ub, A_eq, b_eq)
+        if raw.is_empty:
             raise EmptyTorqueSet("the torque set (32) is empty for this direction")
+        if len(raw.vertices) + len(raw.rays) <= MAX_GENERATORS:  # else: its H-representation only
+            gens = reduce_generators(raw.map(T_map))
     return TorqueSet(
         direction=ms.Lambda_r_t @ u,
         u=u,

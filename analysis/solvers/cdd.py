@@ -1,8 +1,9 @@
 """pycddlib adapter: vertex/ray enumeration of polyhedra and cones (double description).
 
 Inputs and outputs are numpy arrays; cdd's failures are re-raised as :class:`SolverError`.
-Floating-point arithmetic is used; generators are normalised (rays to unit length) and
-redundant ones removed with ``matrix_canonicalize``.
+Floating-point arithmetic is used (a numerical inconsistency is retried on rounded unit rows,
+``RETRY_DECIMALS``); generators are normalised (rays to unit length) and redundant ones removed
+with ``matrix_canonicalize``.
 """
 
 from __future__ import annotations
@@ -80,12 +81,7 @@ def polyhedron_generators(
     H = np.vstack(rows)
     if H.shape[0] == 0:
         return Generators(np.zeros((1, n)), np.zeros((0, n)), np.eye(n))
-    try:
-        mat = cdd.matrix_from_array(H.tolist(), lin_set=lin, rep_type=cdd.RepType.INEQUALITY)
-        poly = cdd.polyhedron_from_matrix(mat)
-        gen = cdd.copy_generators(poly)
-    except (RuntimeError, ValueError) as e:  # pragma: no cover - cdd internal failure
-        raise SolverError("cdd", str(e)) from e
+    gen = _generators(H, lin)
     G = np.array(gen.array, dtype=float).reshape(-1, n + 1)
     lines_idx = set(gen.lin_set)
     verts, rays, lines = [], [], []
@@ -104,6 +100,29 @@ def polyhedron_generators(
         _clean(_unit_rows(np.array(rays).reshape(-1, n))),
         _clean(_unit_rows(np.array(lines).reshape(-1, n))),
     )
+
+
+#: Significant digits of the rounded retries after cdd's "numerical inconsistency" (the standalone
+#: pycddlib has no exact GMP arithmetic): rows scaled to unit norm and rounded, a perturbation of
+#: the data of at most 1e-12, then 1e-9, relative.
+RETRY_DECIMALS = (12, 9)
+
+
+def _generators(H: Array, lin: list[int]) -> cdd.Matrix:
+    """cdd's generators of the H-representation ``[b, -A]`` rows ``H`` (``lin``: equality rows);
+    on a floating-point inconsistency, retried on unit rows rounded to ``RETRY_DECIMALS``."""
+    attempts = [H]
+    norms = np.linalg.norm(H, axis=1, keepdims=True)
+    unit = H / np.where(norms > 0.0, norms, 1.0)
+    attempts += [np.round(unit, d) for d in RETRY_DECIMALS]
+    error: Exception | None = None
+    for data in attempts:
+        try:
+            mat = cdd.matrix_from_array(data.tolist(), lin_set=lin, rep_type=cdd.RepType.INEQUALITY)
+            return cdd.copy_generators(cdd.polyhedron_from_matrix(mat))
+        except (RuntimeError, ValueError) as e:
+            error = e
+    raise SolverError("cdd", str(error)) from error
 
 
 def cone_generators(B: Array) -> Generators:

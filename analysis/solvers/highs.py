@@ -219,6 +219,13 @@ class LPModel:
                 A_eq[int(r) - self._n_ub, int(c)] = float(v)
         self.A_ub, self.A_eq = A_ub, A_eq
 
+    def use_defaults(self) -> None:
+        """Solve from now on with HiGHS' default strategy (presolve, dual simplex), from scratch: the
+        second opinion when a warm primal-simplex answer fails its caller's residual check."""
+        self._h.setOptionValue("presolve", "choose")
+        self._h.setOptionValue("simplex_strategy", 1)
+        self._h.clearSolver()
+
     def set_col_bounds(self, j: int, lb: float, ub: float) -> None:
         lo, up = float(lb) if np.isfinite(lb) else -INF, float(ub) if np.isfinite(ub) else INF
         self._h.changeColBounds(int(j), lo, up)

@@ -33,8 +33,7 @@ from analysis.dafc import (
     dafc_nonempty,
     dafc_set,
 )
-
-WORK_TOL = 1e-9
+from analysis.scales import GRIP_BOUND
 
 
 def _oracle(system: GraspSystem, combination: str) -> DAFCOracle:
@@ -75,8 +74,8 @@ def test_frictionless_disk_by_hand(links: int) -> None:
         for dr in dirs:
             t = oracle.test(dr)
             assert t.member == rule(dr[0]), (combination, dr, t.reason)
-            if t.member:
-                assert t.work == np.inf
+            if t.member:  # n1 + n2 <= GRIP_BOUND F0 (F0 = 1 N without a load): work GRIP_BOUND |vx|
+                assert t.work == pytest.approx(GRIP_BOUND * abs(dr[0]), rel=1e-9)
             elif combination != "DD":
                 assert t.work == pytest.approx(0.0, abs=1e-12)  # dr^T w = vx (n1 - n2) = 0 or <= 0 at best
         s = summarize(p)
@@ -199,28 +198,17 @@ def _certify_member(system: GraspSystem, p: CombinationParts, t: DirectionTest) 
         assert np.linalg.norm(slip(system, i, motion)) > 1e-7 * size
     G_eff = effective_grasp_matrix(system, sel, st.G_c, motion)
     dr = t.direction
-    if t.forces is not None:
-        f = t.forces
-        scale = max(1.0, float(np.abs(f).max()))
-        w = G_eff @ f + system.w_ex
-        assert fs.violation(f) <= 1e-9 * scale
-        np.testing.assert_allclose(st.Xi.T @ w, 0.0, rtol=0, atol=1e-8 * scale)
-        if np.isfinite(t.work):
-            assert dr @ w == pytest.approx(t.work, abs=1e-8 * scale)
-        else:  # unbounded supremum: the forces are a witness with work 1 + |w_ex|
-            assert dr @ w == pytest.approx(1.0 + float(np.linalg.norm(system.w_ex)), abs=1e-7 * scale)
-        assert dr @ w > 0.0
-    if t.forces is None or not np.isfinite(t.work):
-        # unbounded: the homogeneous LP (a ray of forces) does positive work, and the balance
-        # Xi^T w = 0 has an admissible solution to which the ray can be added
-        assert t.work == np.inf
-        A_eq = st.Xi.T @ G_eff
-        status, ray_work, _ = scipy_lp(G_eff.T @ dr, fs.C, np.zeros(fs.C.shape[0]), A_eq, np.zeros(A_eq.shape[0]),
-                                       box=1.0, maximize=True)
-        assert status == 0 and ray_work is not None and ray_work > 1e-10
-        status, _, _ = scipy_lp(np.zeros(G_eff.shape[1]), fs.C, np.zeros(fs.C.shape[0]), A_eq,
-                                -(st.Xi.T @ system.w_ex), box=1e6)
-        assert status == 0
+    # every member carries its forces: admissible, within the grip bound, balancing the passive
+    # directions and doing the reported (positive) work, all in newtons
+    assert t.forces is not None and np.isfinite(t.work)
+    f = t.forces
+    F0 = system.scales.force
+    w = G_eff @ f + system.w_ex
+    assert fs.violation(f) <= 1e-7 * F0
+    assert float(fs.N.sum(axis=0) @ f) <= GRIP_BOUND * F0 * (1 + 1e-9)
+    np.testing.assert_allclose(st.Xi.T @ w, 0.0, rtol=0, atol=1e-6 * F0 * (1 + system.scales.length))
+    assert dr @ w == pytest.approx(t.work, abs=1e-6 * F0)
+    assert dr @ w > system.scales.work_tol(dr)
 
 
 def _certify_non_member_without_s(system: GraspSystem, p: CombinationParts, t: DirectionTest) -> None:
@@ -234,14 +222,19 @@ def _certify_non_member_without_s(system: GraspSystem, p: CombinationParts, t: D
         status, obj, _ = scipy_lp(np.r_[np.zeros(r), 1.0], np.hstack([B_r, -np.ones((k, 1))]), -(B_u @ u))
         assert status == 0 and obj is not None and obj > 1e-10
     else:
-        assert t.reason == "the fingers cannot do positive work"
+        assert t.reason == "the fingers cannot do positive work" or t.reason.startswith("degenerate")
         dr = ms.Lambda_r_t @ u
+        sc = system.scales
         if st.G_c.shape[1] == 0:
-            assert dr @ system.w_ex <= WORK_TOL
+            assert dr @ system.w_ex <= sc.work_tol(dr)
             return
-        status, obj, _ = scipy_lp(st.G_c.T @ dr, fs.C, np.zeros(fs.C.shape[0]), st.Xi.T @ st.G_c,
-                                  -(st.Xi.T @ system.w_ex), box=1e4, maximize=True)
-        assert status == 2 or (obj is not None and obj + dr @ system.w_ex <= 1e-7 * (1 + np.linalg.norm(system.w_ex)))
+        # the same question asked of scipy: the largest work of admissible forces whose total
+        # normal force is within the grip bound
+        A_ub = np.vstack([fs.C, fs.N.sum(axis=0)[None, :]])
+        b_ub = np.r_[np.zeros(fs.C.shape[0]), sc.grip_bound]
+        status, obj, _ = scipy_lp(st.G_c.T @ dr, A_ub, b_ub, st.Xi.T @ st.G_c,
+                                  -(st.Xi.T @ system.w_ex), box=1e2 * sc.grip_bound, maximize=True)
+        assert status == 2 or (obj is not None and obj + dr @ system.w_ex <= 1.01 * sc.work_tol(dr))
 
 
 def _feasible_combinations(name: str, n: int, seed: int) -> list[str]:
