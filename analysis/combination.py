@@ -78,8 +78,20 @@ class CombinationSummary:
         }
 
 
-def summarize(parts: CombinationParts, stationary_known: bool | None = None) -> CombinationSummary:
-    """Feasibility (stationary grasp exists and DAFC is non-empty), DAFC dimension, an example."""
+def no_grasp_reason(violation: float | None) -> str:
+    """The table's reason for an infeasible (18), degenerate when the friction rows would need to
+    give by less than ``DEGENERATE_TOL F0`` (``violation`` from :func:`stationary_violation`)."""
+    if violation is not None and violation <= DEGENERATE_TOL:
+        return f"no stationary grasp (18); degenerate: it holds if friction and balance may give by {violation:.0e} F0"
+    return "no stationary grasp (18)"
+
+
+def summarize(parts: CombinationParts, stationary_known: bool | None = None,
+              violation: float | None = None) -> CombinationSummary:
+    """Feasibility (stationary grasp exists and DAFC is non-empty), DAFC dimension, an example.
+
+    ``violation``: the least friction violation of (18) when it is infeasible, if known (else one
+    LP, :func:`analysis.stationary.stationary_violation`), which marks degenerate verdicts."""
     sy, sel, ms, st, fs = parts.system, parts.sel, parts.ms, parts.st, parts.fs
     c = sel.combination
     p = st.p
@@ -88,7 +100,9 @@ def summarize(parts: CombinationParts, stationary_known: bool | None = None) -> 
     if stationary_known is None:
         stationary_known = min_total_normal(sy, st, fs) is not None
     if not stationary_known:
-        return CombinationSummary(c, False, "no stationary grasp (18)", ms.a, ms.a_bar, 0, p, True, None)
+        if violation is None:
+            violation = stationary_violation(sy, st, fs)
+        return CombinationSummary(c, False, no_grasp_reason(violation), ms.a, ms.a_bar, 0, p, True, None)
     best, dim, exact = dafc_nonempty(parts.oracle())
     if best is None:
         return CombinationSummary(c, False, "DAFC is empty", ms.a, ms.a_bar, 0, p, exact, None)
@@ -262,12 +276,12 @@ def analyze_combination(
         samples = default_samples(ms.a_bar)
     dset = dafc_set(oracle, samples=samples) if ms.a_bar else None
     notes: list[str] = []
-    if grasp is None and ms.a_bar:
-        t_star = stationary_violation(sy, st, fs)
-        if t_star is not None and t_star <= DEGENERATE_TOL:
-            notes.append(f"degenerate: the contacts would hold the object if the friction rows could be violated by "
-                         f"{t_star:.1e} x the force scale ({sy.scales.force:.4g} N); a perturbation of the contact "
-                         "data of that size may change this verdict")
+    if dset is not None and dset.description_error:
+        notes.append(dset.description_error)
+    if grasp is None and ms.a_bar and "degenerate" in summary.reason:
+        notes.append("degenerate: the contacts would hold the object if the friction rows and the balance could "
+                     f"give by that fraction of the force scale ({sy.scales.force:.4g} N); a perturbation of the "
+                     "contact data of that size may change this verdict")
     if grasp is not None and not summary.feasible and summary.reason == "DAFC is empty":
         # any tested member decides: DAFC is not empty (the sampled set or the user's direction)
         found = [t for t in (dset.tests if dset is not None else ()) if t.member]

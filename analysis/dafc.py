@@ -32,14 +32,14 @@ from analysis.exceptions import SolverError
 from analysis.friction import FrictionSet, kinetic_friction
 from analysis.linalg import rank
 from analysis.motion import MotionSpace
-from analysis.scales import FORCE_TOL, GRIP_BOUND
+from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, snap
 from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators
 from analysis.solvers.highs import LPModel, solve_lp
 from analysis.statics import Statics
 from analysis.torque_conditions import torque_conditions
 
 #: Relative tolerance on non-penetration (positive work: :mod:`analysis.scales`).
-ALLOW_TOL = 1e-9
+ALLOW_TOL = 1e-7
 #: An S-point "really slides" when its slip exceeds this fraction of the motion size.
 SLIP_TOL = 1e-7
 
@@ -92,6 +92,7 @@ class DAFCOracle:
         )
         self.exact = not self.slip_depends_on_redundancy
         self._lp: LPModel | None = None
+        self._redundancy: LPModel | None = None
         self._relaxed: LPModel | None = None
         self._G_relaxed = np.zeros((system.D, 0))
         self._d = d
@@ -112,9 +113,13 @@ class DAFCOracle:
             return np.zeros(nr)  # zero redundancy is allowable: the least-L1 choice
         if nr == 0 or not np.any(B_r):
             return None
-        # z = [z+ ; z-] >= 0, zeta = z+ - z-, minimise sum(z)
-        A_ub = np.hstack([B_r, -B_r])
-        res = solve_lp(np.ones(2 * nr), A_ub=A_ub, b_ub=rhs + tol, lb=0.0)
+        # z = [z+ ; z-] >= 0, zeta = z+ - z-, minimise sum(z); one model per oracle, solved cold
+        # so that the redundancy chosen for a direction does not depend on earlier directions
+        if self._redundancy is None:
+            self._redundancy = LPModel(2 * nr, A_ub=np.hstack([B_r, -B_r]), b_ub=rhs + tol / 2, lb=0.0)
+        else:
+            self._redundancy.set_ub_rhs(rhs + tol / 2)  # half the tolerance: the check below has slack
+        res = self._redundancy.solve_cold(np.ones(2 * nr))
         self.lp_count += 1
         if res.status != "optimal":
             return None
@@ -194,8 +199,9 @@ class DAFCOracle:
                 st.G_c.shape[1],
                 A_ub=np.vstack([fs.C, fs.N.sum(axis=0)[None, :]]),
                 b_ub=np.r_[np.zeros(fs.C.shape[0]), GRIP_BOUND],
-                A_eq=self.Xi.T @ st.G_c,
-                b_eq=-(self.Xi.T @ self.system.w_ex) / self.system.scales.force,
+                A_eq=snap(self.Xi.T @ st.G_c),
+                b_eq=snap(-(self.Xi.T @ self.system.w_ex) / self.system.scales.force),
+                feasibility=LP_FEAS_TOL,
             )
         return self._lp
 
@@ -429,6 +435,7 @@ class DAFCSet:
     exact: bool
     tests: tuple[DirectionTest, ...] = field(default=(), repr=False)
     description: DAFCExact | None = None  # exact description (no S-points, small enough)
+    description_error: str | None = None  # why the exact description is missing when cdd failed
 
     @property
     def empty(self) -> bool:
@@ -487,7 +494,7 @@ def dafc_exact(oracle: DAFCOracle) -> DAFCExact | None:
     if L_c == 0:
         K = (P @ sy.w_ex)[None, :]
     else:
-        Q = polyhedron_generators(fs.C, np.zeros(fs.C.shape[0]), A_eq, b_eq)
+        Q = polyhedron_generators(fs.C, np.zeros(fs.C.shape[0]), A_eq, b_eq)  # may raise SolverError
         if Q.is_empty:
             K = np.zeros((0, ms.D))
         else:
@@ -698,5 +705,10 @@ def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int 
         dim = int(np.linalg.matrix_rank(gen_u.all_directions(), tol=1e-9))
     else:
         dim = int(np.linalg.matrix_rank(dirs[member], tol=1e-6))
+    try:
+        description, why = dafc_exact(oracle), None
+    except SolverError as e:
+        # the description is an extra of the report; membership above was decided by the LPs
+        description, why = None, f"exact description of DAFC not available: {e}"
     return DAFCSet(dirs, member, work, gen, dim, oracle.exact and not oracle.sel.s_index, tuple(tests),
-                   dafc_exact(oracle))
+                   description, why)

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from analysis._types import Array
+from analysis.exceptions import SolverError
 from analysis.friction import FrictionSet
 from analysis.linalg import rank
 from analysis.solvers.cdd import Generators, polyhedron_generators, reduce_generators
@@ -79,7 +80,10 @@ def dpfc(st: Statics, fs: FrictionSet, grasp: StationaryGrasp, enumerate_up_to: 
     W = st.G_c @ st.Gamma  # (D, p_bar)
     if p_bar > enumerate_up_to or (p_bar > SMALL_DIM and A_ub.shape[0] > MAX_ENUMERATION_ROWS):
         return _described(A_ub, b_ub, W, st.Xi)
-    g_xi = polyhedron_generators(A_ub, b_ub)
+    try:
+        g_xi = polyhedron_generators(A_ub, b_ub)
+    except SolverError:  # cdd's floating point gave up: the H-representation is still exact
+        return _described(A_ub, b_ub, W, st.Xi)
     g_w = reduce_generators(g_xi.map(W))
     pts = np.vstack([g_w.vertices - g_w.vertices[:1], g_w.all_directions()]) if g_w.vertices.size else g_w.rays
     return DPFC(g_w, rank(pts) if pts.size else 0)

@@ -31,7 +31,7 @@ from analysis.combination import CombinationParts, CombinationSummary, summarize
 from analysis.contacts import GraspSystem
 from analysis.exceptions import CombinationError
 from analysis.scales import REUSE_TOL
-from analysis.stationary import certifies, min_total_normal
+from analysis.stationary import DEGENERATE_TOL, certifies, min_total_normal, stationary_violation
 
 _CLASS = {"F": 2, "S": 1, "N": 1, "D": 0}
 
@@ -88,6 +88,7 @@ class _StationaryCache:
         self.infeasible = np.zeros((0, L), dtype=np.int8)  # (k, L)
         self.witnesses = np.zeros((0, L), dtype=np.int8)  # (k, L)
         self.forces: list[Array] = []  # per witness, (L, d) contact forces [N]
+        self.violations = np.zeros(0)  # per infeasible entry, its least friction violation (inf: none)
 
     def candidates(self, cls: tuple[int, ...]) -> list[Array]:
         """Cached certificates whose classes fit the combination with classes ``cls``."""
@@ -96,12 +97,20 @@ class _StationaryCache:
         c = np.asarray(cls, dtype=np.int8)
         return [self.forces[k] for k in np.flatnonzero(np.all(c >= self.witnesses, axis=1))[:4]]
 
-    def infeasible_for(self, cls: tuple[int, ...]) -> bool:
+    def infeasible_for(self, cls: tuple[int, ...]) -> tuple[bool, float | None]:
+        """Is (18) infeasible for ``cls`` by a cached stronger combination, and the largest friction
+        violation among those (a lower bound of its own: a weaker force set needs at least as much)."""
+        if not self.infeasible.shape[0]:
+            return False, None
         c = np.asarray(cls, dtype=np.int8)
-        return bool(self.infeasible.shape[0] and np.any(np.all(c <= self.infeasible, axis=1)))
+        hit = np.all(c <= self.infeasible, axis=1)
+        if not np.any(hit):
+            return False, None
+        return True, float(np.max(self.violations[hit]))
 
-    def add_infeasible(self, cls: tuple[int, ...]) -> None:
+    def add_infeasible(self, cls: tuple[int, ...], violation: float | None) -> None:
         self.infeasible = np.vstack([self.infeasible, np.asarray(cls, dtype=np.int8)])
+        self.violations = np.r_[self.violations, np.inf if violation is None else violation]
 
     def add_witness(self, parts: CombinationParts, f_c: Array) -> None:
         forces = _contact_forces(parts, f_c)
@@ -253,7 +262,11 @@ def _enumerate_serial(
                                             ms.a, ms.a_bar, 0, st.p, True, None)
             continue
         cls = tuple(_CLASS[s] for s in c)
-        known: bool | None = False if cache.infeasible_for(cls) else None
+        pruned, bound = cache.infeasible_for(cls)
+        known: bool | None = False if pruned else None
+        violation: float | None = None
+        if pruned and bound is not None and bound > DEGENERATE_TOL:
+            violation = bound  # not degenerate: its own violation is at least that
         if known is None and any(certifies(system, st, parts.fs, _selected_forces(parts, f), REUSE_TOL)
                                  for f in cache.candidates(cls)):
             known = True
@@ -261,13 +274,14 @@ def _enumerate_serial(
             stats.stationary_lps += 1
             found = min_total_normal(system, st, parts.fs)
             if found is None:
-                cache.add_infeasible(cls)
+                violation = stationary_violation(system, st, parts.fs)
+                cache.add_infeasible(cls, violation)
             else:
                 cache.add_witness(parts, found[1])
             known = found is not None
         else:
             stats.pruned_stationary += 1
-        summary = summarize(parts, stationary_known=known)
+        summary = summarize(parts, stationary_known=known, violation=violation)
         results[c] = summary
         feasible += summary.feasible
         if limit is not None and feasible >= limit:

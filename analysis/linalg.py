@@ -7,7 +7,7 @@ import numpy as np
 from analysis._types import Array
 
 #: Singular values below ``RANK_RTOL * max(1, s_max)`` count as zero.
-RANK_RTOL = 1e-9
+RANK_RTOL = 1e-7
 
 
 def _tol(s: Array) -> float:

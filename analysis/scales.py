@@ -26,10 +26,14 @@ from analysis._types import Array
 
 #: Residual of an equilibrium or a friction row that still counts as satisfied, in units of F0.
 FORCE_TOL = 1e-6
+#: Primal feasibility tolerance of the force LPs, in units of F0 (their rows are scaled so): above
+#: the effect of a 1e-9 change of the contact data on forces of order F0, so that such a change
+#: decides no verdict, and far below FORCE_TOL.
+LP_FEAS_TOL = 1e-8
 #: Residual a cached certificate may have when it is reused for another combination, in units
-#: of F0: the primal feasibility tolerance of the LPs themselves, so that a reused certificate
-#: is a point that combination's own LP accepts (its verdict does not depend on the cache).
-REUSE_TOL = 1e-10
+#: of F0: the LPs' own feasibility tolerance, so that a reused certificate is a point that
+#: combination's own LP accepts (its verdict does not depend on the cache).
+REUSE_TOL = LP_FEAS_TOL
 #: A contact force below this (in units of F0) carries no load (a D-point is allowed it).
 ZERO_FORCE = 1e-11
 #: The largest total normal force of a certificate, in units of F0.
@@ -38,6 +42,19 @@ GRIP_BOUND = 1e3
 WORK_TOL = 1e-6
 #: Work below this (same units) is zero; between it and WORK_TOL the verdict is degenerate.
 WORK_ZERO = 1e-9
+
+
+#: Entries of a scaled LP row (order one) below this are zero: a lever arm or a normal component
+#: of 1e-9 is a rounding or a perturbation of exact structure (a normal through the centre), and
+#: HiGHS would scale such a row up until its feasibility tolerance no longer covers that noise.
+SNAP_TOL = 1e-8
+
+
+def snap(A: Array, tol: float = SNAP_TOL) -> Array:
+    """``A`` with the entries of magnitude below ``tol`` set to zero (a copy)."""
+    out = np.array(A, dtype=float)
+    out[np.abs(out) < tol] = 0.0
+    return out
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
 from analysis.exceptions import NoStationaryGrasp, SolverError
 from analysis.friction import FrictionSet
-from analysis.scales import FORCE_TOL, GRIP_BOUND
+from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, snap
 from analysis.solvers.highs import LPModel, solve_lp
 from analysis.statics import Statics
 
@@ -89,7 +89,7 @@ def _equilibrium(system: GraspSystem, st: Statics) -> tuple[Array, Array]:
     ``F0 l`` (moments): ``(A_eq (D, L_c), b_eq (D,))``."""
     sc = system.scales
     rows = sc.wrench_weights() * sc.force  # 1 on force rows, 1/l on moment rows
-    return rows[:, None] * st.G_c, -(rows * system.w_ex) / sc.force
+    return snap(rows[:, None] * st.G_c), snap(-(rows * system.w_ex) / sc.force)
 
 
 def min_total_normal(system: GraspSystem, st: Statics, fs: FrictionSet) -> tuple[float, Array] | None:
@@ -105,17 +105,26 @@ def min_total_normal(system: GraspSystem, st: Statics, fs: FrictionSet) -> tuple
     A_eq, b_eq = _equilibrium(system, st)
     A_ub = np.vstack([fs.C, n_sum[None, :]])
     b_ub = np.r_[np.zeros(fs.C.shape[0]), GRIP_BOUND]
-    for attempt in range(2):
-        model = LPModel(L_c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq)
-        if attempt:
+    error: SolverError | None = None
+    for attempt in range(3):
+        model = LPModel(L_c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, feasibility=LP_FEAS_TOL)
+        if attempt == 1:
             model.use_defaults()
-        res = model.solve(n_sum)
+        elif attempt == 2:
+            model.use_ipm()
+        try:
+            res = model.solve(n_sum)
+        except SolverError as e:  # undecided: ask the next method
+            error = e
+            continue
         if res.status != "optimal":
             return None
         assert res.x is not None
         f_c = res.x * sc.force
         if certifies(system, st, fs, f_c):
             return float(n_sum @ f_c), f_c
+    if error is not None and "f_c" not in locals():
+        raise error
     eq, fr = stationary_residuals(system, st, fs, f_c)
     raise SolverError("HiGHS", f"stationary grasp LP: its solution fails the residual check in physical "
                       f"units (equilibrium {eq:.2e} F0, friction {fr:.2e} F0)")
@@ -126,20 +135,22 @@ DEGENERATE_TOL = 1e-6
 
 
 def stationary_violation(system: GraspSystem, st: Statics, fs: FrictionSet) -> float | None:
-    """``t* = min t`` s.t. ``C f_c <= t F0``, (18) and the grip bound: how far (in units of F0) the
-    friction rows must give for the contacts to hold the object (``<= 0`` when they do);
-    ``None`` when even that cannot balance the wrench (the equilibrium itself is infeasible)."""
+    """``t* = min t`` s.t. ``C f_c <= t F0``, ``|G_c f_c + w_ex| <= t`` (units of F0 and F0 l) and
+    the grip bound: how far (units of F0) the friction rows and the equilibrium must give for the
+    contacts to hold the object (``<= 0`` when they do, strictly inside every loaded cone);
+    ``None`` when no contact carries force."""
     L_c = st.G_c.shape[1]
-    if L_c == 0 or fs.C.shape[0] == 0:
+    if L_c == 0:
         return None
     A_eq0, b_eq = _equilibrium(system, st)
-    m = fs.C.shape[0]
+    m, D = fs.C.shape[0], A_eq0.shape[0]
     n_sum = _normal_rows(fs).sum(axis=0)
-    A_ub = np.vstack([np.hstack([fs.C, -np.ones((m, 1))]), np.r_[n_sum, 0.0][None, :]])
-    b_ub = np.r_[np.zeros(m), GRIP_BOUND]
-    A_eq = np.hstack([A_eq0, np.zeros((A_eq0.shape[0], 1))])
+    one_m, one_D = np.ones((m, 1)), np.ones((D, 1))
+    A_ub = np.vstack([np.hstack([fs.C, -one_m]), np.hstack([A_eq0, -one_D]), np.hstack([-A_eq0, -one_D]),
+                      np.r_[n_sum, 0.0][None, :]])
+    b_ub = np.r_[np.zeros(m), b_eq, -b_eq, GRIP_BOUND]
     lb = np.r_[np.full(L_c, -np.inf), -1.0]  # t >= -1: bounded below when the grasp is interior
-    res = solve_lp(np.r_[np.zeros(L_c), 1.0], A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, lb=lb)
+    res = solve_lp(np.r_[np.zeros(L_c), 1.0], A_ub=A_ub, b_ub=b_ub, lb=lb)
     if res.status != "optimal" or res.objective is None:
         return None
     return float(res.objective)

@@ -162,6 +162,7 @@ class LPModel:
         lb: Array | float | None = None,
         ub: Array | float | None = None,
         time_limit: float | None = None,
+        feasibility: float = FEAS_TOL,
     ):
         self.n = n
         A_ub = np.zeros((0, n)) if A_ub is None else np.asarray(A_ub, dtype=float).reshape(-1, n)
@@ -182,7 +183,7 @@ class LPModel:
             "simplex_strategy": 4,
             # tight feasibility: near-singular grasps (e.g. the Allegro scene) otherwise accept
             # friction violations of ~1e-7 and call an infeasible stationary grasp feasible
-            "primal_feasibility_tolerance": FEAS_TOL,
+            "primal_feasibility_tolerance": feasibility,
             "dual_feasibility_tolerance": FEAS_TOL,
         }
         if time_limit is not None:
@@ -225,6 +226,26 @@ class LPModel:
         self._h.setOptionValue("presolve", "choose")
         self._h.setOptionValue("simplex_strategy", 1)
         self._h.clearSolver()
+
+    def use_ipm(self) -> None:
+        """Solve from now on with HiGHS' interior-point method and crossover, from scratch: the third
+        opinion when the simplex runs end undecided on a near-degenerate model."""
+        self._h.setOptionValue("solver", "ipm")
+        self._h.setOptionValue("run_crossover", "on")
+        self._h.clearSolver()
+
+    def set_ub_rhs(self, b_ub: Array) -> None:
+        """New right-hand side of the inequality rows."""
+        b = np.asarray(b_ub, dtype=float).ravel()
+        idx = np.arange(len(b), dtype=np.int32)
+        self._h.changeRowsBounds(len(b), idx, np.full(len(b), -INF), b)  # type: ignore[attr-defined]
+        self.b_ub = b.copy()
+
+    def solve_cold(self, c: Array, maximize: bool = False) -> LPResult:
+        """:meth:`solve` from scratch (no warm start): the answer, including which of several
+        optimal points is returned, does not depend on the model's earlier solves."""
+        self._h.clearSolver()
+        return self.solve(c, maximize)
 
     def set_col_bounds(self, j: int, lb: float, ub: float) -> None:
         lo, up = float(lb) if np.isfinite(lb) else -INF, float(ub) if np.isfinite(ub) else INF
