@@ -156,7 +156,8 @@ def analyze(
     except CTPError as e:
         _fail(str(e), code=1)
     rows = [s for s in summaries if s.feasible] if feasible_only or len(summaries) > 729 else summaries
-    table = Table(title=f"{sc.name}: {sum(s.feasible for s in summaries)} of {len(summaries)} combinations feasible")
+    decided = "combinations decided (strongest first)" if stopped else "combinations"
+    table = Table(title=f"{sc.name}: {sum(s.feasible for s in summaries)} of {len(summaries)} {decided} feasible")
     for col in ("combination", "feasible", "dim DAFC", "dim DPFC", "example direction", "note"):
         table.add_column(col)
     for s in rows:

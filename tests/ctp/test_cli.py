@@ -143,3 +143,21 @@ def test_schema_prints_json_schema(tmp_path: Path) -> None:
     out = tmp_path / "schema.json"
     assert runner.invoke(app, ["schema", "--out", str(out)]).exit_code == 0
     assert json.loads(out.read_text()) == schema
+
+
+def test_analyze_where_and_limit_filter_the_table(tmp_path: Path) -> None:
+    out = tmp_path / "some.json"
+    result = runner.invoke(app, ["analyze", str(PLANAR), "--where", "D>=3", "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    rows = json.loads(out.read_text())["combinations"]
+    expected = {c.combination for c in enumerate_combinations(example_system("planar_disk_envelope"))[0]
+                if c.combination.count("D") >= 3}
+    assert {r["combination"] for r in rows} == expected
+    result = runner.invoke(app, ["analyze", str(PLANAR), "--limit", "2", "--json", str(out)])
+    assert result.exit_code == 0 and "stopped after 2 feasible combinations" in result.output
+    assert sum(r["feasible"] for r in json.loads(out.read_text())["combinations"]) == 2
+    for args, message in ((["--where", "X>=1"], "where: 'X>=1' is not a condition"),
+                          (["--limit", "0"], "limit: 0 must be at least 1"),
+                          (["--combination", "FDFDD", "--limit", "3"], "where/limit")):
+        result = runner.invoke(app, ["analyze", str(PLANAR), *args])
+        assert result.exit_code == 2 and message in result.output, result.output
