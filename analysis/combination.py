@@ -103,9 +103,14 @@ def summarize(parts: CombinationParts, stationary_known: bool | None = None,
         if violation is None:
             violation = stationary_violation(sy, st, fs)
         return CombinationSummary(c, False, no_grasp_reason(violation), ms.a, ms.a_bar, 0, p, True, None)
-    best, dim, exact = dafc_nonempty(parts.oracle())
+    oracle = parts.oracle()
+    best, dim, exact = dafc_nonempty(oracle)
     if best is None:
-        return CombinationSummary(c, False, "DAFC is empty", ms.a, ms.a_bar, 0, p, exact, None)
+        reason = "DAFC is empty"
+        if oracle.undecided:
+            reason += f"; degenerate: {oracle.undecided} force LPs were numerically undecided"
+            exact = False
+        return CombinationSummary(c, False, reason, ms.a, ms.a_bar, 0, p, exact, None)
     return CombinationSummary(c, True, "feasible", ms.a, ms.a_bar, dim, p, exact, best.direction)
 
 
@@ -282,7 +287,7 @@ def analyze_combination(
         notes.append("degenerate: the contacts would hold the object if the friction rows and the balance could "
                      f"give by that fraction of the force scale ({sy.scales.force:.4g} N); a perturbation of the "
                      "contact data of that size may change this verdict")
-    if grasp is not None and not summary.feasible and summary.reason == "DAFC is empty":
+    if grasp is not None and not summary.feasible and summary.reason.startswith("DAFC is empty"):
         # any tested member decides: DAFC is not empty (the sampled set or the user's direction)
         found = [t for t in (dset.tests if dset is not None else ()) if t.member]
         if direction is not None:

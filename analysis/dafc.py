@@ -97,6 +97,7 @@ class DAFCOracle:
         self._G_relaxed = np.zeros((system.D, 0))
         self._d = d
         self.lp_count = 0
+        self.undecided = 0  # force LPs that ended numerically undecided (degenerate data)
 
     # -- kinematics -----------------------------------------------------------------------------
 
@@ -219,12 +220,19 @@ class DAFCOracle:
             G_eff = st.G_c + kf.G_w
             model = self._force_lp()
             s_cols = np.array([self.sel.c_slices[i].start for i in self.sel.s_index])
-            E = self.Xi.T @ G_eff[:, s_cols]  # (p, #S)
+            E = snap(self.Xi.T @ G_eff[:, s_cols])  # (p, #S), noise-level entries zero as in the base rows
             rows, cols = np.indices(E.shape)
             model.change_coefficients(rows.ravel() + model.n_ub, s_cols[cols.ravel()], E.ravel())
         if G_eff.shape[1] == 0:
             return float(dr @ w_ex), np.zeros(0)
-        res = model.solve(G_eff.T @ dr, maximize=True)
+        try:
+            res = model.solve(G_eff.T @ dr, maximize=True)
+        except SolverError:
+            # every HiGHS method (warm, cold, defaults, interior point) ended undecided: this motion
+            # is not a member, and the combination's verdict says the data are degenerate
+            self.undecided += 1
+            model.use_defaults()  # leave no half-solved state for the next direction
+            return np.nan, None
         self.lp_count += 1
         if res.status == "infeasible":
             return -np.inf, None
@@ -339,6 +347,10 @@ class DAFCOracle:
                                          f"S-point {still[0]} does not slide for this motion", self.exact)
                     continue
             sup, f = self.work_sup(dr, zc, witness)
+            if np.isnan(sup):
+                last = DirectionTest(dr, u, zc, False, np.nan, "degenerate: the force LP is numerically undecided",
+                                     False)
+                continue
             if sup > sc.work_tol(dr):
                 return DirectionTest(dr, u, zc, True, sup, "member", self.exact, f)
             why = ("the fingers cannot do positive work" if sup <= sc.work_zero(dr) else

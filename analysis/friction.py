@@ -21,6 +21,7 @@ import numpy as np
 from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
 from analysis.friction_cone import friction_pyramid
+from analysis.scales import snap
 
 
 @dataclass(frozen=True)
@@ -56,7 +57,7 @@ def friction_set(system: GraspSystem, sel: Selection, mu_scale: float = 1.0) -> 
         n = system.normals[i]
         mu = mu_scale * system.mu[i]
         if s == "F":
-            N[i, sl] = n
+            N[i, sl] = snap(n)  # the grip rows of the LPs: noise-level components 0
             if mu == 0.0:
                 # a frictional contact at nu = 0: normal force >= 0, tangential force zero
                 T = system.tangents[i]
@@ -67,7 +68,7 @@ def friction_set(system: GraspSystem, sel: Selection, mu_scale: float = 1.0) -> 
             else:
                 facets, gdirs = friction_pyramid(n, system.tangents[i], mu, d, k)
             rows = np.zeros((len(facets), L_c))
-            rows[:, sl] = facets / np.linalg.norm(facets, axis=1, keepdims=True)
+            rows[:, sl] = snap(facets / np.linalg.norm(facets, axis=1, keepdims=True))  # noise-level entries 0
             gens = np.zeros((len(gdirs), L_c))
             gens[:, sl] = gdirs
         else:  # S or N: scalar normal force >= 0

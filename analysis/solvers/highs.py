@@ -286,6 +286,15 @@ class LPModel:
             ms = self._h.getModelStatus()
             self._h.setOptionValue("presolve", "off")
             self._h.setOptionValue("simplex_strategy", 4)
+        if ms in _RETRY:
+            # last: the interior-point method with crossover, which does not share the simplex
+            # runs' pivoting trouble on near-degenerate (perturbed, nearly parallel) rows
+            self._h.setOptionValue("solver", "ipm")
+            self._h.setOptionValue("run_crossover", "on")
+            self._h.clearSolver()
+            self._h.run()
+            ms = self._h.getModelStatus()
+            self._h.setOptionValue("solver", "choose")
         problem = self.problem(c, maximize)
         if ms == highspy.HighsModelStatus.kOptimal:
             sol = self._h.getSolution()
