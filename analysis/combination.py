@@ -287,12 +287,12 @@ def analyze_combination(
         notes.append("degenerate: the contacts would hold the object if the friction rows and the balance could "
                      f"give by that fraction of the force scale ({sy.scales.force:.4g} N); a perturbation of the "
                      "contact data of that size may change this verdict")
+    dtest: DirectionTest | None = oracle.test(np.asarray(direction, dtype=float)) if direction is not None else None
     if grasp is not None and not summary.feasible and summary.reason.startswith("DAFC is empty"):
         # any tested member decides: DAFC is not empty (the sampled set or the user's direction)
         found = [t for t in (dset.tests if dset is not None else ()) if t.member]
-        if direction is not None:
-            probe = oracle.test(np.asarray(direction, dtype=float))
-            found = found + ([probe] if probe.member else [])
+        if dtest is not None and dtest.member:
+            found.append(dtest)
         if found:
             members = np.array([t.u for t in found])
             summary = CombinationSummary(summary.combination, True, "feasible", ms.a, ms.a_bar,
@@ -303,12 +303,10 @@ def analyze_combination(
     rg = regrasp_cone(sy, sel, ms, st, fs) if grasp is not None else None
     torque: TorqueSet | None = None
     err: str | None = None
-    dtest: DirectionTest | None = None
     unc: FrictionUncertainty | None = None
     target = None
     if direction is not None:
         target = np.asarray(direction, dtype=float)
-        dtest = oracle.test(target)
     elif summary.example_direction is not None:
         target = summary.example_direction
     if grasp is not None and target is not None:

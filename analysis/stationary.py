@@ -95,8 +95,9 @@ def _equilibrium(system: GraspSystem, st: Statics) -> tuple[Array, Array]:
 def min_total_normal(system: GraspSystem, st: Statics, fs: FrictionSet) -> tuple[float, Array] | None:
     """``N* = min sum n_f`` subject to (18) and ``sum n_f <= GRIP_BOUND F0``; ``None`` when no such
     forces exist. The LP is posed in the scaled unknowns ``f / F0`` with equilibrated rows, and its
-    solution is re-checked in newtons (:func:`certifies`); a solution that fails the check is
-    solved once more from scratch, then raised as :class:`SolverError`."""
+    solution is re-checked in newtons (:func:`certifies`). A run that ends undecided or whose
+    solution fails the check is repeated with HiGHS' default strategy, then its interior-point
+    method; after that the failure is raised as :class:`SolverError`."""
     L_c = st.G_c.shape[1]
     sc = system.scales
     if L_c == 0:
@@ -105,17 +106,17 @@ def min_total_normal(system: GraspSystem, st: Statics, fs: FrictionSet) -> tuple
     A_eq, b_eq = _equilibrium(system, st)
     A_ub = np.vstack([fs.C, n_sum[None, :]])
     b_ub = np.r_[np.zeros(fs.C.shape[0]), GRIP_BOUND]
-    error: SolverError | None = None
-    for attempt in range(3):
+    failure = "no method decided the LP"
+    for method in ("warm", "defaults", "ipm"):
         model = LPModel(L_c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, feasibility=LP_FEAS_TOL)
-        if attempt == 1:
+        if method == "defaults":
             model.use_defaults()
-        elif attempt == 2:
+        elif method == "ipm":
             model.use_ipm()
         try:
             res = model.solve(n_sum)
         except SolverError as e:  # undecided: ask the next method
-            error = e
+            failure = str(e)
             continue
         if res.status != "optimal":
             return None
@@ -123,11 +124,10 @@ def min_total_normal(system: GraspSystem, st: Statics, fs: FrictionSet) -> tuple
         f_c = res.x * sc.force
         if certifies(system, st, fs, f_c):
             return float(n_sum @ f_c), f_c
-    if error is not None and "f_c" not in locals():
-        raise error
-    eq, fr = stationary_residuals(system, st, fs, f_c)
-    raise SolverError("HiGHS", f"stationary grasp LP: its solution fails the residual check in physical "
-                      f"units (equilibrium {eq:.2e} F0, friction {fr:.2e} F0)")
+        eq, fr = stationary_residuals(system, st, fs, f_c)
+        failure = (f"its solution fails the residual check in physical units (equilibrium {eq:.2e} F0, "
+                   f"friction {fr:.2e} F0)")
+    raise SolverError("HiGHS", f"stationary grasp LP: {failure}")
 
 
 #: An infeasible (18) whose least friction violation is below this (units of F0) is degenerate.
