@@ -11,10 +11,11 @@ the first failing check of a contact is reported and the next contact is checked
 * the point ``p_C`` lies on the surface of its body (a link's axis inflated by its radius, or a
   fixed body's shape) and on the object's surface, within ``GEOMETRY_TOL``;
 * the normal lies in the normal cones at ``p_C`` (:mod:`analysis.geometry`), within
-  ``NORMAL_CONE_TOL`` (the sine of the angle to the cone): ``-n`` in the object's, ``n`` in the
-  body's. At a smooth point that is the surface normal; at a box vertex or edge, a polygon corner
-  or a cylinder rim, any direction between the faces' normals (a cube's corner on a table takes the
-  table's normal). The cones take every feature within ``GEOMETRY_TOL`` of the point.
+  ``NORMAL_CONE_TOL`` (the sine of the angle to the cone): ``-n`` in the object's, and ``n`` in
+  a link's within ``BODY_NORMAL_CONE_TOL`` (3 deg: link capsules model real links). At a smooth
+  point that is the surface normal; at a box vertex or edge, a polygon corner or a cylinder rim,
+  any direction between the faces' normals (a cube's corner on a table takes the table's
+  normal). The cones take every feature within ``GEOMETRY_TOL`` of the point.
 
 A finger that cannot be built (a URDF that does not load) is reported instead of every contact
 check. Errors are :class:`SceneError` whose ``loc`` names the field (``contacts.2.point``) and
@@ -48,8 +49,13 @@ from analysis.scene import NORMALISE_TOL, UNIT_TOL, Scene, clean_loc, scene_erro
 GEOMETRY_TOL = 1e-4
 #: Largest distance of a unit contact normal to a normal cone (about the angle, in radians).
 NORMAL_CONE_TOL = 1e-3
+#: ... to a link's normal cone (a fixed body's: ``NORMAL_CONE_TOL``): sin 3 deg, as the link is a
+#: capsule model of a real link and the planner places fingertips by inverse kinematics to
+#: GEOMETRY_TOL. The object's normal defines the contact frame.
+BODY_NORMAL_CONE_TOL = float(np.sin(np.radians(3.0)))
 
 __all__ = [
+    "BODY_NORMAL_CONE_TOL",
     "GEOMETRY_TOL",
     "MAX_SCENE_BYTES",
     "MAX_SCENE_DEPTH",
@@ -106,7 +112,7 @@ def _contact_errors(scene: Scene) -> list[InitErrorDetails]:
             err(("contacts", i, "normal"), why, c.normal)
             continue
         cone = body_normal_cone(scene, hand, ref, p, GEOMETRY_TOL)
-        if cone is not None and not cone.contains(u, NORMAL_CONE_TOL):
+        if cone is not None and not cone.contains(u, NORMAL_CONE_TOL if ref.is_fixed else BODY_NORMAL_CONE_TOL):
             why = _cone_message(cone, u, f"out of body '{c.body}'", f"of body '{c.body}'", "into the body")
             err(("contacts", i, "normal"), why, c.normal)
     return errors
