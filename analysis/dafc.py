@@ -67,7 +67,7 @@ class DirectionTest:
     u: Array  # (a_bar,) its coordinates on Lambda~_r
     zeta_c: Array | None  # (a,) the motion tested (None when not allowable)
     member: bool
-    work: float  # supremum of the work (inf when unbounded, nan when not tested)
+    work: float  # supremum of the work within the grip bound (finite; nan when not tested or undecided)
     reason: str
     exact: bool
     forces: Array | None = None  # (L_c,) a maximiser of the work (None when unbounded)
