@@ -175,7 +175,7 @@ def validate_contact(nodes: GraphNodes, state: GraspState, new: GraspState, f: i
     hand, options = nodes.hand, nodes.options
     with nodes.timings.measure("ompl"):
         tp = plan_transfer(nodes.model, state, f, qg, tip_ref, options.approach * nodes.size,
-                           seed=options.seed, time_limit=options.ompl_time)
+                           seed=options.seed, time_limit=options.ompl_time, checks=options.ompl_checks)
     if tp is None:
         nodes.reject("OMPL found no collision-free transfer to a new contact")
         return None

@@ -97,7 +97,7 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
             continue
         with nodes.timings.measure("ompl"):
             om = plan_object_motion(nodes.model, state, straight, keep, list(dset), seed=options.seed,
-                                    time_limit=options.ompl_time, sliding=sset)
+                                    time_limit=options.ompl_time, sliding=sset, checks=options.ompl_checks)
         if om is None:
             nodes.reject("OMPL found no collision-free object motion on the contact manifold")
             continue

@@ -32,6 +32,7 @@ from analysis._types import Array
 from analysis.geometry import shape_signed_distance
 from analysis.kinematics import BodyRef, HandKinematics
 from analysis.pose import Pose
+from planner.budget import CheckBudget
 from planner.collision import DENSE_STEP, CollisionModel
 from planner.ik import joint_limits
 from planner.manifold import ContactManifold, pose_displacement, project_manifold
@@ -208,15 +209,17 @@ def plan_object_motion(
     sticking: Sequence[int],
     separating: Sequence[int],
     seed: int = 0,
-    time_limit: float = 1.0,
+    time_limit: float = 2.0,
     tolerance: float = 1e-8,
     sliding: Sequence[int] = (),
+    checks: int = 300,
 ) -> ConstrainedObjectMotion | None:
     """Plan the motion of hand and object from ``state`` to the end of ``goal`` (the configuration
     reached along the DAFC direction, :func:`integrate_object_motion`) with OMPL's constrained
     planning: a ``ProjectedStateSpace`` over ``[q; s]`` with the constraint
     :class:`ContactManifold` of the sticking and ``sliding`` contacts (``A_c [dq; dr] = 0``, eq. 7
-    and 19, to every order), ``RRTConnect`` (seeded) whose motions are geodesics of the manifold, a validity
+    and 19, to every order), ``RRTConnect`` (seeded, ended after ``checks`` validity checks or, as a
+    safety net, ``time_limit`` seconds: :class:`CheckBudget`) whose motions are geodesics of the manifold, a validity
     checker for joint limits and collisions (:meth:`CollisionModel.finger_clearance`; the contact
     links may touch the object, overlaps present at the start may not deepen), and the solution
     densified on the manifold until no joint moves more than :data:`DENSE_STEP` between two
@@ -279,7 +282,8 @@ def plan_object_motion(
         return np.array([space.getValueAddressAtIndex(st, j) for j in range(n)])
 
     ss = og.SimpleSetup(si)
-    ss.setStateValidityChecker(lambda st: valid(read(st)))
+    budget = CheckBudget(checks, time_limit)
+    ss.setStateValidityChecker(budget.counted(lambda st: valid(read(st))))
     a, b = space.allocState(), space.allocState()
     a.copy([float(v) for v in x0])
     b.copy([float(v) for v in x1])
@@ -288,7 +292,7 @@ def plan_object_motion(
     planner.setRange(max(total, 1e-6))  # try the direct geodesic first
     ss.setPlanner(planner)
     t0 = time.perf_counter()
-    status = ss.solve(time_limit)
+    status = ss.solve(budget.condition())
     if not bool(status) or not ss.haveExactSolutionPath():
         return None
     path = ss.getSolutionPath()

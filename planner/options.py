@@ -14,7 +14,11 @@ class PlannerOptions:
     approach: float = 0.06  # pre-contact back-off distance
     clearance: float = 0.04  # separation reached by an object motion
     effort_weight: float = 0.1
-    ompl_time: float = 0.15
+    #: an OMPL query (one transfer, one object motion) ends after this many state-validity checks,
+    #: so that a plan does not depend on the machine's speed (:class:`planner.budget.CheckBudget`)
+    ompl_checks: int = 300
+    #: wall-clock safety net of one OMPL query (seconds), far above what ``ompl_checks`` takes
+    ompl_time: float = 2.0
     dafc_samples: int = 64
     seed: int = 0
     #: object motions may also separate single finger contacts (more edges, slower); by default

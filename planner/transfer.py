@@ -21,6 +21,7 @@ from ompl import util as ou
 
 from analysis._types import Array
 from analysis.kinematics import BodyRef
+from planner.budget import CheckBudget
 from planner.collision import CollisionModel, path_clearance_certified
 from planner.ik import joint_limits
 from planner.state import GraspState
@@ -46,11 +47,14 @@ def plan_transfer(
     tip_ref: BodyRef,
     approach: float,
     seed: int = 0,
-    time_limit: float = 1.0,
+    time_limit: float = 2.0,
+    checks: int = 300,
 ) -> TransferPath | None:
     """Plan a collision-free joint path (OMPL RRTConnect, seeded) from the finger's configuration
     in ``state`` to ``q_goal``, through a pre-contact configuration backed off by ``approach``
-    (scene units) along the normal. ``None`` when no certified path is found."""
+    (scene units) along the normal. Each OMPL query (the search, the shortcutting) ends after
+    ``checks`` validity checks, or ``time_limit`` seconds as a safety net (:class:`CheckBudget`).
+    ``None`` when no certified path is found."""
     hand = model.hand
     sl = hand.finger_slice(finger)
     m = sl.stop - sl.start
@@ -93,15 +97,16 @@ def plan_transfer(
     # fine checks (0.01 rad) if the certificate rejects the coarse path
     for resolution in (0.05, 0.01):
         ss = og.SimpleSetup(space)
-        ss.setStateValidityChecker(lambda s: valid_q(np.array([s[j] for j in range(m)])))
+        budget = CheckBudget(checks, time_limit)
+        ss.setStateValidityChecker(budget.counted(lambda s: valid_q(np.array([s[j] for j in range(m)]))))
         si = ss.getSpaceInformation()
         si.setStateValidityCheckingResolution(resolution / extent)
         ss.setStartAndGoalStates(s0, s1)
         ss.setPlanner(og.RRTConnect(si))
-        status = ss.solve(time_limit)
+        status = ss.solve(budget.condition())
         if not bool(status) or not ss.haveExactSolutionPath():
             return None
-        ss.simplifySolution(min(0.5, time_limit))
+        ss.simplifySolution(budget.condition())
         p = ss.getSolutionPath()
         free = np.array([[p.getState(i)[j] for j in range(m)] for i in range(p.getStateCount())])
         waypoints = np.vstack([free, q_goal[None, :]])
