@@ -14,16 +14,15 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from ompl import base as ob
-
 
 class CheckBudget:
     """At most ``checks`` state-validity checks, and at most ``seconds`` of wall-clock time, for one
     OMPL query (``solve`` or ``simplifySolution``).
 
     :meth:`counted` wraps the validity checker so that every call is counted (motion validators
-    call it too); :meth:`condition` is the termination condition OMPL polls between iterations;
-    :meth:`restart` starts the count again for the next query of the same problem."""
+    call it too); :meth:`condition` starts a query (the count from zero) and returns the predicate
+    for OMPL's ``PlannerTerminationCondition``, polled between iterations (the OMPL modules wrap
+    it, so OMPL stays in ``planner.transfer`` and ``planner.object_motion``)."""
 
     def __init__(self, checks: int, seconds: float) -> None:
         if checks < 1:
@@ -57,6 +56,6 @@ class CheckBudget:
             return True
         return False
 
-    def condition(self) -> ob.PlannerTerminationCondition:
+    def condition(self) -> Callable[[], bool]:
         self.restart()
-        return ob.PlannerTerminationCondition(self.exhausted)
+        return self.exhausted

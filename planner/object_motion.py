@@ -292,7 +292,7 @@ def plan_object_motion(
     planner.setRange(max(total, 1e-6))  # try the direct geodesic first
     ss.setPlanner(planner)
     t0 = time.perf_counter()
-    status = ss.solve(budget.condition())
+    status = ss.solve(ob.PlannerTerminationCondition(budget.condition()))
     if not bool(status) or not ss.haveExactSolutionPath():
         return None
     path = ss.getSolutionPath()

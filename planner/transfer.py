@@ -103,10 +103,10 @@ def plan_transfer(
         si.setStateValidityCheckingResolution(resolution / extent)
         ss.setStartAndGoalStates(s0, s1)
         ss.setPlanner(og.RRTConnect(si))
-        status = ss.solve(budget.condition())
+        status = ss.solve(ob.PlannerTerminationCondition(budget.condition()))
         if not bool(status) or not ss.haveExactSolutionPath():
             return None
-        ss.simplifySolution(budget.condition())
+        ss.simplifySolution(ob.PlannerTerminationCondition(budget.condition()))
         p = ss.getSolutionPath()
         free = np.array([[p.getState(i)[j] for j in range(m)] for i in range(p.getStateCount())])
         waypoints = np.vstack([free, q_goal[None, :]])
