@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 import yaml
@@ -34,6 +34,7 @@ from pydantic import ValidationError
 from pydantic_core import InitErrorDetails
 
 from analysis._types import Array
+from analysis.detect import DEFAULT_MU, DEFAULT_TOLERANCE, Detection, UnplacedScene, detect_contacts
 from analysis.exceptions import SceneError
 from analysis.geometry import (
     NormalCone,
@@ -69,6 +70,8 @@ __all__ = [
     "parse_scene_text",
     "read_scene_data",
     "scene_from_dict",
+    "wants_detection",
+    "with_detected_contacts",
 ]
 
 
@@ -155,11 +158,52 @@ def check_geometry(scene: Scene) -> None:
         raise _first_error(errors) from None
 
 
+def wants_detection(data: Any) -> TypeGuard[dict[str, Any]]:
+    """Whether a parsed scene leaves its contacts to the detector (:mod:`analysis.detect`):
+    ``contacts`` omitted, ``[]`` or ``"auto"``."""
+    return isinstance(data, dict) and ("contacts" not in data or data["contacts"] == [] or data["contacts"] == "auto")
+
+
+def with_detected_contacts(data: dict[str, Any], *, tolerance: float = DEFAULT_TOLERANCE,
+                           mu: float = DEFAULT_MU) -> tuple[dict[str, Any], Detection]:
+    """The parsed scene ``data`` with its ``contacts`` replaced by those the detector finds at its
+    configuration, and the detection (near misses included). The rest of the scene is validated
+    first (SceneError naming its first bad field); SceneError at ``contacts`` when the object
+    touches nothing within ``tolerance``, and when a body within ``tolerance`` is farther than
+    ``GEOMETRY_TOL`` from the object or penetrates it deeper than that (its contact would fail the
+    check that a point lies on both surfaces). The result is not yet geometrically checked."""
+    try:
+        draft = UnplacedScene.model_validate({**data, "contacts": []})
+    except ValidationError as e:
+        raise _first_error(_as_errors(e)) from None
+    detection = detect_contacts(draft, tolerance=tolerance, mu=mu)
+    if not detection.contacts:
+        given = "omitted" if "contacts" not in data else f"{data['contacts']!r}"
+        nearest = ("" if detection.nearest is None else
+                   f"; the nearest body is '{detection.nearest[0]}' at {detection.nearest[1]:.4g}")
+        raise SceneError(("contacts",), f"{given}, so contacts are found from the geometry, but the object "
+                         f"touches nothing within {tolerance:g}{nearest}")
+    apart = [c for c in detection.contacts if abs(c.gap) > GEOMETRY_TOL]
+    if apart:
+        c = max(apart, key=lambda c: abs(c.gap))
+        if c.gap < 0:
+            raise SceneError(("contacts",), f"'{c.body}' penetrates the object by {-c.gap:.4g}; a contact must "
+                             f"lie on both surfaces within {GEOMETRY_TOL:g}: move the body out of the object")
+        raise SceneError(("contacts",), f"'{c.body}' is within the tolerance {tolerance:g} of the object but "
+                         f"{c.gap:.4g} away from it; a contact must lie on both surfaces within "
+                         f"{GEOMETRY_TOL:g}: move the body onto the object, or give a tolerance below "
+                         f"{c.gap:.4g} to list it as a near miss")
+    return {**data, "contacts": [c.to_json() for c in detection.contacts]}, detection
+
+
 def scene_from_dict(data: Any) -> Scene:
     """Validate a parsed scene (the model, then :func:`check_geometry`); raise
-    :class:`SceneError` naming the first bad field."""
+    :class:`SceneError` naming the first bad field. Contacts omitted, ``[]`` or ``"auto"`` are
+    found from the geometry first (:func:`with_detected_contacts`, default tolerance and ``mu``)."""
     if isinstance(data, Scene):
         return data  # pydantic does not validate a model instance again; neither does this
+    if wants_detection(data):
+        data, _ = with_detected_contacts(data)
     try:
         scene = Scene.model_validate(data)
     except ValidationError as e:

@@ -165,6 +165,8 @@ class SceneObject(_Model):
 class FixedBody(_Model):
     name: Annotated[str, Field(min_length=1, pattern=r"^[^/]+$")]
     shape: FixedShape
+    #: friction coefficient of contacts found on this body (``"contacts": "auto"``); default: the detector's
+    mu: Annotated[float, Field(ge=0, le=MAX_MAGNITUDE, allow_inf_nan=False)] | None = None
 
 
 class Base2D(_Model):
@@ -211,6 +213,8 @@ class Finger2D(_Model):
     base: Base2D
     links: Annotated[list[Link2D], Field(min_length=1)]
     q: list[FiniteFloat]
+    #: friction coefficient of contacts found on this body (``"contacts": "auto"``); default: the detector's
+    mu: Annotated[float, Field(ge=0, le=MAX_MAGNITUDE, allow_inf_nan=False)] | None = None
 
     @model_validator(mode="after")
     def _q_length(self) -> Finger2D:
@@ -227,6 +231,8 @@ class Finger3D(_Model):
     joints: Annotated[list[Joint3D], Field(min_length=1)]
     tip: Vec3
     q: list[FiniteFloat]
+    #: friction coefficient of contacts found on this body (``"contacts": "auto"``); default: the detector's
+    mu: Annotated[float, Field(ge=0, le=MAX_MAGNITUDE, allow_inf_nan=False)] | None = None
 
     @model_validator(mode="after")
     def _q_length(self) -> Finger3D:
@@ -253,6 +259,8 @@ class FingerURDF(_Model):
     urdf: UrdfSpec
     q: list[FiniteFloat]
     link_radius: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
+    #: friction coefficient of contacts found on this body (``"contacts": "auto"``); default: the detector's
+    mu: Annotated[float, Field(ge=0, le=MAX_MAGNITUDE, allow_inf_nan=False)] | None = None
 
 
 def _finger_kind(value: Any) -> str | None:

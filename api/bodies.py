@@ -20,13 +20,30 @@ from typing import Any, TypeVar
 from fastapi.exceptions import RequestValidationError
 from pydantic import BaseModel, ValidationError
 
+from analysis.loader import wants_detection, with_detected_contacts
+from analysis.scene import Scene
+from api.schemas import _check_files
+
 M = TypeVar("M", bound=BaseModel)
 
 
 def validate_body(model: type[M], data: Any) -> M:
-    """``model`` from a parsed JSON body; RequestValidationError (located in ``body``) if invalid."""
+    """``model`` from a parsed JSON body; RequestValidationError (located in ``body``) if invalid.
+
+    A ``scene`` (a :class:`~analysis.scene.Scene` field) whose contacts are omitted, ``[]`` or
+    ``"auto"`` gets the contacts found from its geometry first (:func:`with_detected_contacts`;
+    its SceneError is a 422 naming ``scene.<field>``), once its files passed the HTTP check."""
     if isinstance(data, model):
         return data
+    field = model.model_fields.get("scene")
+    scene = data.get("scene") if isinstance(data, dict) else None
+    if field is not None and field.annotation is Scene and wants_detection(scene):
+        try:
+            _check_files(scene)
+        except ValueError:
+            pass  # the model's validation below names the file
+        else:
+            data = {**data, "scene": with_detected_contacts(scene)[0]}
     try:
         return model.model_validate(data)
     except ValidationError as e:

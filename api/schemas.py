@@ -6,7 +6,8 @@ from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
-from analysis.scene import Scene
+from analysis.detect import DEFAULT_MU, DEFAULT_TOLERANCE
+from analysis.scene import MAX_MAGNITUDE, Scene
 from planner.goals import Goal
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
@@ -111,6 +112,47 @@ class ExampleScene(BaseModel):
     contacts: int
     description: str
     scene: dict[str, Any]
+
+
+class ContactsCreate(BaseModel):
+    """A scene whose contacts are to be found from its geometry (any ``contacts`` it has are
+    replaced), the distance ``tolerance`` within which surfaces touch (scene units) and the
+    friction ``mu`` of contacts on bodies that name none."""
+
+    model_config = ConfigDict(extra="forbid")
+    scene: dict[str, Any]
+    tolerance: Annotated[float, Field(gt=0, le=MAX_MAGNITUDE, allow_inf_nan=False)] = DEFAULT_TOLERANCE
+    mu: Annotated[float, Field(ge=0, le=MAX_MAGNITUDE, allow_inf_nan=False)] = DEFAULT_MU
+
+    @field_validator("scene", mode="before")
+    @classmethod
+    def _scene_files(cls, v: Any) -> Any:
+        return _check_files(v)
+
+
+class DetectedContactPublic(BaseModel):
+    body: str
+    point: list[float]
+    normal: list[float]
+    mu: float
+    gap: float
+
+
+class NearMissPublic(BaseModel):
+    body: str
+    distance: float
+    object_point: list[float]
+    body_point: list[float]
+
+
+class ContactsPublic(BaseModel):
+    """The complete scene (its ``contacts`` those found), each contact with its gap, and the
+    near misses (bodies closer than 10 tolerances that do not touch)."""
+
+    scene: dict[str, Any]
+    contacts: list[DetectedContactPublic]
+    near_misses: list[NearMissPublic]
+    tolerance: float
 
 
 class GeometryCreate(_In):

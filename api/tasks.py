@@ -114,6 +114,22 @@ def run_geometry(payload: dict[str, Any], progress: Progress | None = None) -> d
             "contacts": contacts, "frames": frames}
 
 
+def run_contacts(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
+    """``POST /scenes/contacts``: the contacts found from the scene's geometry
+    (:mod:`analysis.detect`, within ``tolerance``, friction ``mu`` where a body names none), the
+    complete scene with them (validated as every scene is) and the near misses."""
+    from analysis.loader import with_detected_contacts
+
+    data = {k: v for k, v in payload["scene"].items() if k != "contacts"}
+    full, det = with_detected_contacts(data, tolerance=payload["tolerance"], mu=payload["mu"])
+    scene = scene_from_dict(full)
+    return {"scene": scene.model_dump(mode="json"),
+            "contacts": [{**c.to_json(), "gap": c.gap} for c in det.contacts],
+            "near_misses": [{"body": m.body, "distance": m.distance, "object_point": list(m.object_point),
+                             "body_point": list(m.body_point)} for m in det.near_misses],
+            "tolerance": det.tolerance}
+
+
 def _rounded(a: Any) -> list[float]:
     return [round(float(x), 9) for x in np.asarray(a).ravel()]
 
@@ -123,6 +139,7 @@ TASKS: dict[str, Callable[[dict[str, Any], Progress | None], dict[str, Any]]] = 
     "enumeration": run_enumeration,
     "plan": run_plan,
     "geometry": run_geometry,
+    "contacts": run_contacts,
 }
 
 

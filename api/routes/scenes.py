@@ -9,13 +9,20 @@ from fastapi import APIRouter, File, Response, UploadFile
 from pydantic import SkipValidation, ValidationError
 
 from analysis.exceptions import SceneError
-from analysis.loader import check_geometry, parse_scene_data, read_scene_data, scene_from_dict
+from analysis.loader import (
+    check_geometry,
+    parse_scene_data,
+    read_scene_data,
+    scene_from_dict,
+    wants_detection,
+    with_detected_contacts,
+)
 from analysis.scene import Scene
 from api.bodies import validated
 from api.deps import AnalysisPoolDep, LightPoolDep, SettingsDep, check_hand_size, check_raw_hand_size
 from api.errors import ApiError
 from api.lanes import geometry_lane, run_in_lane
-from api.schemas import ErrorBody, ExampleScene, GeometryCreate, _check_files
+from api.schemas import ContactsCreate, ContactsPublic, ErrorBody, ExampleScene, GeometryCreate, _check_files
 
 router = APIRouter(prefix="/scenes", tags=["scenes"])
 
@@ -68,6 +75,8 @@ def _validate_upload(raw: bytes, suffix: str, max_bytes: int, settings: Any) -> 
         _check_files(data)
     except ValueError as e:
         raise ApiError(422, f"scene.{e}") from None
+    if wants_detection(data):  # contacts omitted, [] or "auto": found from the geometry
+        data, _ = with_detected_contacts(data)
     try:
         scene = Scene.model_validate(data)
     except ValidationError:
@@ -102,3 +111,20 @@ async def scene_geometry(raw: Annotated[GeometryCreate, SkipValidation], setting
     response.headers["X-Lane"] = lane
     return await run_in_lane(lane, light, pool, "geometry", payload, timeout=settings.request_time_limit)
 
+
+
+@router.post("/contacts", response_model=ContactsPublic, responses={413: {"model": ErrorBody},
+                                                                   422: {"model": ErrorBody}})
+async def scene_contacts(raw: Annotated[ContactsCreate, SkipValidation], settings: SettingsDep,
+                         light: LightPoolDep, pool: AnalysisPoolDep, response: Response) -> dict[str, Any]:
+    """The contacts between the object and every finger link and fixed body at the scene's
+    configuration, found from the geometry within ``tolerance`` (any ``contacts`` the scene has
+    are replaced), the complete scene with them, and the near misses (closer than 10
+    tolerances, not touching). An object that touches nothing is a 422 at ``scene.contacts``.
+
+    Computed in a light worker under ``request_time_limit``; scenes over ``max_joints`` joints get 413."""
+    check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
+    body = await validated(ContactsCreate, raw)  # off the event loop (api/bodies.py)
+    payload = {"scene": body.scene, "tolerance": body.tolerance, "mu": body.mu}
+    response.headers["X-Lane"] = "light"
+    return await run_in_lane("light", light, pool, "contacts", payload, timeout=settings.request_time_limit)
