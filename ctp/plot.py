@@ -18,7 +18,10 @@ if TYPE_CHECKING:
     from analysis.combination import CombinationReport
     from analysis.scene import Scene
 
-STATE_COLOURS = {"F": "tab:blue", "S": "tab:orange", "D": "tab:gray", "N": "tab:green"}
+#: one colour per contact state, the same as the dashboard's (api/static/app.js, COLORS)
+STATE_COLOURS = {"F": "#2a9d8f", "S": "#e9a03b", "D": "#d1495b", "N": "#577590"}
+#: DAFC members, the same green as the dashboard's DAFC plot
+DAFC_COLOUR = "#2a9d8f"
 
 
 def draw_scene(ax: Any, scene: Scene, combination: str | None = None) -> None:
@@ -59,7 +62,8 @@ def draw_scene(ax: Any, scene: Scene, combination: str | None = None) -> None:
                 e = n + sgn * c.mu * t
                 e = e / np.linalg.norm(e)
                 ax.plot([p[0], p[0] + size * e[0]], [p[1], p[1] + size * e[1]], color=col, lw=0.8)
-        ax.text(p[i0], p[i1], f" C{ci + 1}:{state}", fontsize=8, color=col)
+        # contacts numbered from 0, as on the dashboard and in `ctp simulate`
+        ax.text(p[i0], p[i1], f" {ci}:{state}", fontsize=8, color=col)
     ax.set_aspect("equal")
     ax.set_title(f"{scene.name}" + (f"  [{combination}]" if combination else ""))
     ax.autoscale_view()
@@ -76,7 +80,7 @@ def plot_report(path: str | Path, scene: Scene, report: CombinationReport | None
         ax1 = fig.add_subplot(1, 2, 2, projection="3d")
         X = ds.directions[:, :3]  # 2-D: (x, y, theta); 3-D: the translation part
         m = ds.member
-        ax1.scatter(X[m, 0], X[m, 1], X[m, 2], c="tab:red", s=12, label="DAFC")
+        ax1.scatter(X[m, 0], X[m, 1], X[m, 2], c=DAFC_COLOUR, s=12, label="DAFC")
         ax1.scatter(X[~m, 0], X[~m, 1], X[~m, 2], c="lightgray", s=4, label="not in DAFC")
         labels = ("x", "y", "theta") if scene.dim == 2 else ("x", "y", "z")
         for setter in (ax1.set_xlim, ax1.set_ylim, ax1.set_zlim):

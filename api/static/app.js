@@ -230,9 +230,13 @@ function drawScene() {
     }
   }
   if (!frameInfo || state.frameIndex === 0) {
+    // a plan frame's letters name the scene's contacts when it has the same contacts, in order
+    const same = frameInfo && frameInfo.contacts.length === scene.contacts.length
+      && frameInfo.contacts.every((b, k) => b === scene.contacts[k].body);
+    const contactLetters = frameInfo ? (same ? frameInfo.combination : null) : state.combination;
     geom.contacts.forEach((c, i) => {
       const p = c.point, n = c.normal, q = proj(p);
-      const s = state.combination ? state.combination[i] : null;
+      const s = contactLetters ? contactLetters[i] || null : null;
       const color = s ? COLORS[s] : "#e76f51";
       // friction cone: the force directions that can act on the object at this contact
       if (scene.dim === 2) {
@@ -250,7 +254,7 @@ function drawScene() {
       }
       const tail = proj(sub(p, mul(n, 1.3 * L)));
       el(svg, "line", { x1: tail[0], y1: tail[1], x2: q[0], y2: q[1], stroke: color, "stroke-width": 2, "marker-end": "url(#arrow)", class: "normal" });
-      el(svg, "circle", { cx: q[0], cy: q[1], r: 5, fill: color, stroke: "#fff", class: "contact" });
+      el(svg, "circle", { cx: q[0], cy: q[1], r: 5, fill: color, stroke: "#fff", class: "contact", "data-state": s || "" });
       el(svg, "text", { x: tail[0] + 3, y: tail[1] - 3, "font-size": 11, fill: "#222" }, `${i}${s ? ":" + s : ""}`);
     });
   }
@@ -259,7 +263,17 @@ function drawScene() {
   el(m, "path", { d: "M0,0 L10,5 L0,10 z", fill: "#333" });
 }
 
+function detachJob() {
+  // the job keeps running on the server, but its result no longer belongs to what is shown
+  stopPolling(); stopPlaying();
+  state.job = null; state.plan = null; state.frames = []; state.frameIndex = 0;
+  $("job-status").textContent = "no job"; delete $("job-status").dataset.status;
+  $("job-progress").value = 0; $("cancel-btn").disabled = true; $("steps").innerHTML = "";
+  $("contact-states").innerHTML = ""; $("torque-bars").innerHTML = "";
+}
+
 async function setScene(scene, label) {
+  detachJob();
   state.scene = scene; state.combination = null; state.rows = []; state.frames = []; state.plan = null;
   state.extraBounds = [];
   $("scene-error").textContent = ""; $("analysis-error").textContent = ""; $("job-error").textContent = "";
@@ -356,9 +370,11 @@ async function startJob(kind) {
   if (!state.scene) return;
   $("job-error").textContent = "";
   stopPolling();
-  const body = kind === "plan" ? { scene: state.scene, goal: { type: $("goal-select").value } } : { scene: state.scene };
+  const scene = state.scene;
+  const body = kind === "plan" ? { scene, goal: { type: $("goal-select").value } } : { scene };
   try {
     const job = await api("POST", kind === "plan" ? "/plans" : "/enumerations", body);
+    if (state.scene !== scene) return;  // the scene changed while the job was being created
     state.job = job; showJob(job); $("cancel-btn").disabled = false;
     state.pollTimer = setInterval(pollJob, 400);
   } catch (e) { $("job-error").textContent = e.message; }
@@ -370,21 +386,32 @@ function showJob(job) {
   $("job-progress").value = job.progress;
   const pct = Math.round(job.progress * 100);
   const t = job.elapsed_seconds != null ? ` · ${job.elapsed_seconds.toFixed(1)} s` : "";
-  $("job-status").textContent = `${job.kind} ${job.id.slice(0, 8)}: ${job.status} ${pct}% — ${job.message}${t}`;
+  $("job-status").textContent = `${job.kind} ${job.id}: ${job.status} ${pct}% — ${job.message}${t}`;
   $("job-status").dataset.status = job.status;
+  $("job-status").dataset.jobId = job.id;
   if (job.error) $("job-error").textContent = job.error;
 }
 
 async function pollJob() {
   if (!state.job) return;
+  const current = state.job, scene = state.scene;
+  const stale = () => state.job === null || state.job.id !== current.id || state.scene !== scene;
   let job;
-  try { job = await api("GET", state.job.url); } catch (e) { $("job-error").textContent = e.message; stopPolling(); return; }
+  try { job = await api("GET", current.url); } catch (e) { if (!stale()) { $("job-error").textContent = e.message; stopPolling(); } return; }
+  if (stale()) return;
   state.job = job; showJob(job);
   if (["succeeded", "failed", "cancelled"].includes(job.status)) {
     stopPolling(); $("cancel-btn").disabled = true;
     if (job.status === "succeeded") {
       const result = await api("GET", job.result_url);
-      if (job.kind === "plan") await loadPlan(result); else showRows(result);
+      if (stale()) return;
+      if (job.kind === "plan") {
+        if (!result.found) {  // the job ran to its end, but found no plan: say so, not "succeeded"
+          $("job-status").textContent = `plan ${job.id}: no plan (the reason below)`;
+          $("job-status").dataset.status = "no-plan";
+        }
+        await loadPlan(result, scene);
+      } else showRows(result);
     }
   }
 }
@@ -397,7 +424,8 @@ async function cancelJob() {
 // ---------------------------------------------------------------------------------------------
 // plan playback
 
-async function loadPlan(plan) {
+async function loadPlan(plan, scene) {
+  if (state.scene !== scene) return;
   state.plan = plan;
   const steps = $("steps"); steps.innerHTML = "";
   $("player").hidden = false;
@@ -414,7 +442,8 @@ async function loadPlan(plan) {
   const kept = items.filter((it, i) => i % stride === 0 || i === items.length - 1 || items[i + 1].step !== it.step);
   state.frames = [];
   if (kept.length) {
-    const geom = await api("POST", "/scenes/geometry", { scene: state.scene, configurations: kept.map((it) => it.q) });
+    const geom = await api("POST", "/scenes/geometry", { scene, configurations: kept.map((it) => it.q) });
+    if (state.scene !== scene || state.plan !== plan) return;  // another scene or job meanwhile
     state.frames = kept.map((it, i) => {
       const s = plan.steps[it.step];
       return { step: it.step, fingers: geom.frames[i].fingers, pose: it.pose, combination: s.combination,
@@ -428,6 +457,7 @@ async function loadPlan(plan) {
     if (f.pose) { const o = objectOutline(state.scene, objectFrame(state.scene, f.pose)); for (const [c, r] of o.circles) state.extraBounds.push(c.map((x) => x + r), c.map((x) => x - r)); for (const l of o.lines) state.extraBounds.push(...l); }
   }
   $("frame-slider").max = Math.max(0, state.frames.length - 1);
+  $("player").hidden = plan.steps.length === 0;  // nothing to play
   setFrame(0);
 }
 
@@ -462,8 +492,13 @@ function drawTorques(tau) {
   el(svg, "text", { x: 200, y: 12, "font-size": 10 }, `max |τ| = ${m.toFixed(3)}`);
 }
 
+function stopPlaying() {
+  if (state.playTimer) clearInterval(state.playTimer);
+  state.playTimer = null; $("play-btn").textContent = "Play";
+}
+
 function togglePlay() {
-  if (state.playTimer) { clearInterval(state.playTimer); state.playTimer = null; $("play-btn").textContent = "Play"; return; }
+  if (state.playTimer) { stopPlaying(); return; }
   $("play-btn").textContent = "Pause";
   state.playTimer = setInterval(() => {
     if (state.frameIndex >= state.frames.length - 1) { togglePlay(); return; }
