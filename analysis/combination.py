@@ -19,6 +19,7 @@ from analysis.dpfc import DPFC, dpfc
 from analysis.exceptions import CTPError, NoStationaryGrasp
 from analysis.friction import FrictionSet, friction_set, kinetic_friction
 from analysis.motion import MotionSpace, motion_space
+from analysis.quality import epsilon, wrench_ball
 from analysis.regrasp import RegraspCone, regrasp_cone
 from analysis.statics import Statics, statics
 from analysis.stationary import (
@@ -175,6 +176,13 @@ class CombinationReport:
                     "along +- each axis of its span (not every vertex)",
                     "A_xi": _list(dp.A_xi), "b_xi": _list(dp.b_xi), "W_xi": _list(dp.W_xi),
                     "unbounded_axes": dp.unbounded_axes}
+        if self.dpfc is not None:  # grasp quality (analysis/quality.py), radii [N] in the (f, m / l) metric
+            ball, eps = wrench_ball(self.dpfc, self.parts.system.scales), epsilon(st, self.parts.fs,
+                                                                                 self.parts.system.scales)
+            r_p = None if ball.radius is None or not np.isfinite(ball.radius) else ball.radius  # inf: not JSON
+            out["quality"] = {"wrench_ball": r_p, "wrench_ball_reason": ball.reason,
+                              "epsilon": eps.radius, "epsilon_kind": "Ferrari-Canny L1 (sum), primitive wrenches "
+                              "of this combination's friction set", "metric_length": self.parts.system.scales.length}
         if self.direction_test is not None:
             t = self.direction_test
             out["direction_test"] = {"direction": _list(t.direction), "member": t.member, "reason": t.reason,

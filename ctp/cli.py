@@ -25,16 +25,23 @@ from rich.table import Table
 from analysis.combination import analyze_combination
 from analysis.contacts import build_system
 from analysis.dafc import SEMANTICS
+from analysis.detect import DEFAULT_MU, DEFAULT_TOLERANCE, NEAR_FACTOR
 from analysis.enumerate import enumerate_combinations, parse_where
 from analysis.exceptions import CTPError, SceneError
 from analysis.geometry import object_size
-from analysis.loader import load_scene, read_scene_data, scene_from_dict
+from analysis.loader import load_scene, read_scene_data, scene_from_dict, with_detected_contacts
 from analysis.modes import combination_admissible, enumerate_modes
 from analysis.scene import check_enumerable, scene_json_schema
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="Contact-state closure analysis and planning.")
 console = Console()
 err_console = Console(stderr=True)
+
+
+#: exit codes of ``ctp plan`` and ``ctp simulate`` beyond 0 (success) and 2 (bad input)
+EXIT_NO_PLAN = 1  # ctp plan: no plan found
+EXIT_DROPPED = 1  # ctp simulate: the object was dropped (or the analysis failed)
+EXIT_OFF_PLAN = 3  # the replay ended outside its tolerance (ctp plan --replay: or dropped the object)
 
 
 def _fail(message: str, code: int = 2) -> NoReturn:
@@ -307,7 +314,8 @@ def _plan_scene(plan_path: Path, data: dict[str, Any], scene_path: Path | None) 
 def _simulate_plan_file(plan_path: Path, data: dict[str, Any], scene_path: Path | None,
                         json_out: Path | None) -> None:
     """``ctp simulate PLAN.json``: the continuous replay of :func:`sim.plan_replay.simulate_plan`.
-    Exit code 0 with the report, 1 if the object was dropped, 2 for bad input."""
+    Exit code 0 when the replay meets the plan, 1 if the object was dropped, 2 for bad input, 3 if
+    it ended outside the tolerance (position or rotation)."""
     from sim.plan_replay import simulate_plan
 
     sc = _plan_scene(plan_path, data, scene_path)
@@ -321,7 +329,9 @@ def _simulate_plan_file(plan_path: Path, data: dict[str, Any], scene_path: Path 
     if json_out:
         _write(json_out, json.dumps(rep.to_json(), indent=1), "--json")
     if rep.dropped:
-        raise typer.Exit(1)
+        raise typer.Exit(EXIT_DROPPED)
+    if not rep.ok:
+        raise typer.Exit(EXIT_OFF_PLAN)
 
 
 def _print_plan_simulation(rep: Any) -> None:
@@ -333,10 +343,10 @@ def _print_plan_simulation(rep: Any) -> None:
                       highlight=False, soft_wrap=True)
     console.print(f"final pose simulated {_fmt(rep.simulated_final_pose, 5)} vs planned "
                   f"{_fmt(rep.planned_final_pose, 5)}", highlight=False, soft_wrap=True)
-    console.print(f"displacement simulated {_fmt(rep.simulated, 5)} vs planned {_fmt(rep.planned, 5)}: "
-                  f"relative error {rep.relative_error:.2%} (tolerance {rep.tolerance:.0%}); "
+    console.print(f"displacement simulated {_fmt(rep.simulated, 5)} vs planned {_fmt(rep.planned, 5)}; "
                   f"largest regrasp drift {rep.max_regrasp_deviation:.2e} (object size {rep.object_size:.3g}); "
                   f"{rep.duration:.2f} s simulated", highlight=False, soft_wrap=True)
+    console.print(f"final pose: {rep.error.describe(rep.tolerance)}", highlight=False, soft_wrap=True)
     console.print("dropped: " + (f"YES ({rep.drop_reason})" if rep.dropped else "no") + "; "
                   + ("within tolerance" if rep.ok else "NOT within tolerance"), highlight=False, soft_wrap=True)
 
@@ -357,7 +367,12 @@ def simulate(
 ) -> None:
     """Replay joint torques in MuJoCo (quasi-static) and report the object's motion and contacts;
     or, given a plan file, replay the whole plan in one simulation and compare the final pose with
-    the plan's (exit code 1 if the object was dropped)."""
+    the plan's: position error in scene units (m) and rotation error in radians, each relative to
+    the planned displacement, tolerance 5 % each.
+
+    Exit codes: 0 done (a plan file: the replay met the plan); 1 the object was dropped (or the
+    analysis found no torque to replay); 2 bad input; 3 a plan file's replay ended outside the
+    tolerance."""
     from sim.report import format_report
     from sim.torque_replay import simulate_torques
 
@@ -413,30 +428,93 @@ def simulate(
 
 
 @app.command()
+def contacts(
+    scene: Annotated[Path, typer.Argument(help="scene file (.json, .yaml); contacts it has are replaced")],
+    out: Annotated[Path | None, typer.Option(help="write the complete scene (JSON) with the contacts found")] = None,
+    tolerance: Annotated[float, typer.Option(help="distance within which two surfaces touch (scene units)")] = (
+        DEFAULT_TOLERANCE),
+    mu: Annotated[float, typer.Option(help="friction of the contacts on bodies that name none ('mu')")] = DEFAULT_MU,
+) -> None:
+    """Find the contacts between the object and every finger link and fixed body at the scene's
+    configuration (an edge or face on a surface: the corners of the patch), list them and the
+    near misses (closer than 10 tolerances, not touching), and write the complete scene."""
+
+    _check_out(out, "--out")
+    if not (np.isfinite(tolerance) and tolerance > 0):
+        _fail(f"tolerance: {tolerance} must be a positive number")
+    if not (np.isfinite(mu) and mu >= 0):
+        _fail(f"mu: {mu} must be a non-negative number")
+    try:
+        data = read_scene_data(scene)
+        if not isinstance(data, dict):
+            raise SceneError((), "a scene must be a mapping of fields")
+        data = {k: v for k, v in data.items() if k != "contacts"}
+        full, det = with_detected_contacts(data, tolerance=tolerance, mu=mu)
+        sc = scene_from_dict(full)  # the complete scene passes the validation of every scene
+    except SceneError as e:
+        _fail(f"{scene}: {e}")
+    table = Table(title=f"{sc.name}: {len(det.contacts)} contacts within {tolerance:g}")
+    for col in ("#", "body", "point", "normal (into the object)", "mu", "gap"):
+        table.add_column(col)
+    for i, c in enumerate(det.contacts):
+        table.add_row(str(i), c.body, _fmt(np.array(c.point), 6), _fmt(np.array(c.normal), 6), f"{c.mu:g}",
+                      f"{c.gap:.3g}")
+    console.print(table)
+    if det.near_misses:
+        for m in det.near_misses:
+            console.print(f"near miss: {m.body} at {m.distance:.4g} (object point {_fmt(np.array(m.object_point), 6)})",
+                          highlight=False, soft_wrap=True)
+    else:
+        console.print(f"no near misses (nothing closer than {NEAR_FACTOR * tolerance:g} without touching)")
+    if out:
+        _write(out, json.dumps(full, indent=2) + "\n", "--out")
+
+
+@app.command()
 def plan(
     scene: Annotated[Path, typer.Argument(help="scene file (.json, .yaml)")],
     goal: Annotated[str, typer.Option(help="active | passive | fingertips | combination | pose")] = "active",
     combination: Annotated[str | None, typer.Option(help="goal combination, e.g. FSDD (--goal combination)")] = None,
     pose: Annotated[str | None, typer.Option(help="goal pose: 2-D 'x y theta', 3-D 'x y z rx ry rz'")] = None,
-    tolerance: Annotated[float, typer.Option(help="pose tolerance (scene units and radians)")] = 0.05,
+    position_tolerance: Annotated[float | None, typer.Option(
+        help="pose goal: position tolerance in scene units (metres); default 1 % of the object size")] = None,
+    rotation_tolerance: Annotated[str | None, typer.Option(
+        help="pose goal: rotation tolerance in radians, or 'free'; default 0.05")] = None,
+    tolerance: Annotated[float | None, typer.Option(
+        help="pose goal: older single tolerance, the default of both of the above")] = None,
     time_limit: Annotated[float | None, typer.Option(help="seconds for the search")] = None,
     out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
     replay: Annotated[bool, typer.Option(help="replay the whole plan in MuJoCo (one continuous simulation)")] = False,
 ) -> None:
     """Plan contact-state transitions from the scene's grasp to a goal: active or passive closure,
-    fingertip contacts only, a named combination or an object pose."""
+    fingertip contacts only, a combination (one letter per scene contact: D released, the others
+    still touching in that state) or an object pose.
+
+    Exit codes: 0 a plan was found (or the start already meets the goal; with --replay: and the
+    replay met it); 1 no plan was found (the reason is printed); 2 bad input; 3 (--replay) the
+    replay dropped the object or ended outside its tolerance."""
 
     from planner import Goal
     from planner import plan as make_plan
 
     _check_out(out, "--out")
     sc = _load(scene)
+    rot: float | str | None = rotation_tolerance
+    if rotation_tolerance is not None and rotation_tolerance.strip().lower() != "free":
+        try:
+            rot = float(rotation_tolerance)
+        except ValueError:
+            _fail(f"rotation-tolerance: '{rotation_tolerance}' is not a number of radians nor 'free'")
+    elif rotation_tolerance is not None:
+        rot = "free"
     try:
         g = Goal(type=goal, combination=combination,
                  pose=None if pose is None else [float(x) for x in _parse_vector(pose, "pose")],
-                 tolerance=tolerance)
+                 tolerance=tolerance, position_tolerance=position_tolerance, rotation_tolerance=rot)
     except ValidationError as e:
-        _fail(f"goal: {e.errors()[0]['msg']}")
+        err = e.errors()[0]
+        where = ".".join(str(x) for x in err["loc"] if not str(x).startswith(("function-", "literal[")))
+        _fail(f"goal{'.' + where if where else ''}: {err['msg']}")
     with Progress(TextColumn("[bold]planning"), BarColumn(), TextColumn("{task.description}"),
                   TimeElapsedColumn(), console=err_console, transient=True) as bar:
         task = bar.add_task("", total=1.0)
@@ -452,6 +530,8 @@ def plan(
             _fail(str(e), code=1)
     if not result.found:
         console.print(f"[bold red]no plan:[/] {result.reason}", highlight=False, soft_wrap=True)
+    elif not result.steps:
+        console.print(f"[bold]goal met at the start:[/] {result.reason}", highlight=False, soft_wrap=True)
     else:
         table = Table(title=f"plan: {len(result.steps)} steps, cost {result.cost:.3f}")
         for col in ("step", "kind", "combination", "contacts after", "cost"):
@@ -464,7 +544,10 @@ def plan(
                       f"{result.stats.nodes_expanded} nodes expanded in {result.stats.seconds_total:.2f} s")
     data = result.to_json()
     data["scene"] = sc.model_dump(mode="json", exclude_none=True)  # 'ctp simulate PLAN.json' reloads it
-    if replay and result.found:
+    rep = None
+    if replay and result.found and not result.steps:
+        console.print("replay: nothing to replay (no steps)")
+    elif replay and result.found:
         from sim.plan_replay import simulate_plan
 
         try:
@@ -476,7 +559,9 @@ def plan(
     if out is not None:
         _write(out, json.dumps(data, indent=1), "--out")
     if not result.found:
-        raise typer.Exit(1)
+        raise typer.Exit(EXIT_NO_PLAN)
+    if rep is not None and not rep.ok:
+        raise typer.Exit(EXIT_OFF_PLAN)
 
 
 @app.command(context_settings={"allow_extra_args": True, "ignore_unknown_options": True, "help_option_names": []})

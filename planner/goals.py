@@ -15,10 +15,14 @@ from typing import Annotated, Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
+from analysis._types import Array
 from analysis.dafc import dafc_set
 from analysis.dpfc import dpfc
-from analysis.exceptions import CTPError
+from analysis.exceptions import CTPError, SceneError
+from analysis.geometry import object_size
 from analysis.kinematics import HandKinematics
+from analysis.pose import Pose
+from analysis.scene import Scene
 from planner.state import GraspContact, GraspState, StateAnalysis, all_f
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
@@ -31,14 +35,25 @@ class Goal(BaseModel):
       DAFC the whole sphere);
     * ``passive``: DPFC balances every wrench of ``wrenches`` (default: the external wrench and
       its negative) without changing the joint torques;
-    * ``combination``: a named contact-state combination (one letter per contact of the scene
-      the search reached), ``combination`` field;
+    * ``combination``: the scene's contacts in the states of ``combination``, one letter per contact
+      of the *scene* (its order), see :func:`combination_reached`: every ``D`` contact released
+      (no longer touching), every other one still touching (sticking contacts at the same point,
+      sliding ones where they slid), no contact made during the plan, and the remaining contacts
+      hold the object with those letters (the stationary grasp, 18; with ``S`` letters also a
+      non-empty DAFC, 22: they can slide). The scene's own grasp reaches ``FF...F``;
     * ``fingertips``: every finger touches the object, each only with the tip of its last link
       (contacts on fixed bodies such as the palm may remain), and the contacts hold the object
       (a stationary grasp, 18): a regrasp from an enveloping grasp to a fingertip grasp (the
       paper's Fig. 5, steps 1 to 3, the palm still holding);
     * ``pose``: the object pose ``pose`` (2-D ``[x, y, theta]``, 3-D ``[x, y, z, rx, ry, rz]`` with
-      a rotation vector) within ``tolerance`` (Euclidean, scene units and radians).
+      a rotation vector): the position within ``position_tolerance`` (scene units, metres for
+      robot scenes; default :data:`DEFAULT_POSITION_TOLERANCE` object sizes,
+      :func:`analysis.geometry.object_size`) and the rotation within ``rotation_tolerance``
+      (radians, the angle of the rotation between the two poses; default
+      :data:`DEFAULT_ROTATION_TOLERANCE`; ``"free"``: any rotation). ``tolerance`` is the older
+      single field: when given it is the default of both (scene units and radians), so goals
+      written with it keep working (each error is now compared with it on its own, no longer
+      their Euclidean norm).
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
@@ -46,7 +61,9 @@ class Goal(BaseModel):
     type: Literal["active", "passive", "combination", "pose", "fingertips"]
     combination: Annotated[str, Field(min_length=1, pattern=r"^[FNSDfnsd]+$")] | None = None
     pose: list[FiniteFloat] | None = None
-    tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] = 0.05
+    tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    position_tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    rotation_tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] | Literal["free"] | None = None
     wrenches: list[list[FiniteFloat]] | None = None
 
     @model_validator(mode="after")
@@ -58,6 +75,101 @@ class Goal(BaseModel):
         if self.pose is not None and len(self.pose) not in (3, 6):
             raise ValueError("pose must have 3 (2-D: x, y, theta) or 6 (3-D: x, y, z, rotation vector) values")
         return self
+
+    def position_tol(self, size: float) -> float:
+        """The position tolerance in scene units, for an object of size ``size``."""
+        if self.position_tolerance is not None:
+            return float(self.position_tolerance)
+        if self.tolerance is not None:
+            return float(self.tolerance)
+        return DEFAULT_POSITION_TOLERANCE * float(size)
+
+    def rotation_tol(self) -> float | None:
+        """The rotation tolerance in radians, ``None`` when the rotation is free."""
+        if self.rotation_tolerance == "free":
+            return None
+        if self.rotation_tolerance is not None:
+            return float(self.rotation_tolerance)
+        if self.tolerance is not None:
+            return float(self.tolerance)
+        return DEFAULT_ROTATION_TOLERANCE
+
+
+#: default position tolerance of a pose goal, in object sizes (:func:`analysis.geometry.object_size`):
+#: 1 % (3.2 mm for the 0.3 x 0.4 x 0.4 m box, whose 3 cm lift the start does not meet)
+DEFAULT_POSITION_TOLERANCE = 0.01
+#: default rotation tolerance of a pose goal, radians (about 2.9 degrees)
+DEFAULT_ROTATION_TOLERANCE = 0.05
+
+
+def pose_errors(goal: Goal, state: GraspState) -> tuple[float, float]:
+    """Position error (scene units) and rotation error (radians, the angle of the rotation from
+    the goal's orientation to the state's) of ``state`` against a pose goal."""
+    assert goal.pose is not None
+    target = Pose.from_vector(goal.pose, state.dim)
+    return (float(np.linalg.norm(state.pose.position - target.position)),
+            state.pose.rotation_angle_to(target))
+
+
+def pose_goal_remaining(goal: Goal, state: GraspState) -> Array:
+    """The displacement ``(D,)`` still to go to a pose goal (pose-vector difference; the rotation
+    part zero when the goal leaves the rotation free)."""
+    assert goal.pose is not None
+    rest = np.asarray(goal.pose, float) - state.pose_vector()
+    if state.dim == 2:
+        rest[2] = (rest[2] + np.pi) % (2 * np.pi) - np.pi
+    if goal.rotation_tol() is None:
+        rest[state.dim:] = 0.0
+    return rest
+
+
+def check_combination(goal: Goal, scene: Scene) -> None:
+    """A combination goal that fits the scene: one letter per scene contact, ``F``/``S``/``D`` for a
+    contact with friction and ``N``/``D`` for a frictionless one; else :class:`SceneError` at
+    ``("goal", "combination")``."""
+    if goal.combination is None:
+        return
+    comb = goal.combination
+    if any(ch not in "FNSDfnsd" for ch in comb):
+        raise SceneError(("goal", "combination"), "letters must be F, N, S or D")
+    if len(comb) != len(scene.contacts):
+        raise SceneError(("goal", "combination"), f"'{comb}' has {len(comb)} letters; the scene has "
+                         f"{len(scene.contacts)} contacts (one letter per contact, in the scene's order)")
+    for i, (ch, c) in enumerate(zip(comb.upper(), scene.contacts, strict=True)):
+        if c.mu > 0 and ch == "N":
+            raise SceneError(("goal", "combination"), f"letter {i} is N but contact {i} ({c.body}) has friction "
+                             f"(mu = {c.mu:g}): use F, S or D")
+        if c.mu <= 0 and ch in "FS":
+            raise SceneError(("goal", "combination"), f"letter {i} is {ch} but contact {i} ({c.body}) is "
+                             "frictionless (mu = 0): use N or D")
+
+
+def combination_reached(goal: Goal, state: GraspState, analysis: Callable[[GraspState], StateAnalysis]) -> bool:
+    """A combination goal (one letter per contact of the scene) in ``state``: the contacts of the
+    state are exactly the scene's contacts whose letter is not ``D`` (followed through the plan by
+    :attr:`~planner.state.GraspContact.origin`: kept by releases of other fingers, by object
+    motions, moved along when they slide); a contact made during the plan, or a scene contact
+    marked ``D`` that still touches, does not match. The remaining contacts, with their letters,
+    must hold the object (18); with ``S`` letters the combination must also be feasible (22
+    non-empty: those contacts can slide)."""
+    assert goal.combination is not None
+    comb = goal.combination.upper()
+    origins = [c.origin for c in state.contacts]
+    if any(o is None or o >= len(comb) for o in origins):
+        return False
+    kept = [i for i, ch in enumerate(comb) if ch != "D"]
+    if sorted(o for o in origins if o is not None) != kept:
+        return False
+    letters = "".join(comb[o] for o in origins if o is not None)
+    if not letters:
+        return False
+    try:
+        sa = analysis(state)
+        if sa.stationary(letters) is None:
+            return False
+        return "S" not in letters or sa.summary(letters).feasible
+    except CTPError:
+        return False
 
 
 def is_fingertip(hand: HandKinematics, c: GraspContact) -> bool:
@@ -78,18 +190,21 @@ def is_fingertip(hand: HandKinematics, c: GraspContact) -> bool:
 
 
 def goal_reached(goal: Goal, state: GraspState, hand: HandKinematics,
-                 analysis: Callable[[GraspState], StateAnalysis], dafc_samples: int = 64) -> bool:
+                 analysis: Callable[[GraspState], StateAnalysis], dafc_samples: int = 64,
+                 size: float | None = None) -> bool:
     """Is the goal satisfied in ``state``? (active: a~ = D and every sampled direction in DAFC of
     the all-F combination; passive: DPFC (28) of the all-F combination contains every wrench;
     fingertips: every finger touches with its tip only and (18) holds;
-    combination: that combination is feasible; pose: within tolerance). ``analysis`` gives the
-    (cached) analysis of a state."""
+    combination: :func:`combination_reached`; pose: position and rotation each within its
+    tolerance). ``analysis`` gives the (cached) analysis of a state; ``size`` is the object size
+    (:func:`analysis.geometry.object_size`) of the default position tolerance (default: from the
+    state's analysis)."""
     if goal.type == "pose":
-        assert goal.pose is not None
-        diff = np.asarray(goal.pose, float) - state.pose_vector()
-        if state.dim == 2:
-            diff[2] = (diff[2] + np.pi) % (2 * np.pi) - np.pi
-        return float(np.linalg.norm(diff)) <= goal.tolerance
+        if size is None:
+            size = object_size(analysis(state).scene)
+        pos, rot = pose_errors(goal, state)
+        rot_tol = goal.rotation_tol()
+        return pos <= goal.position_tol(size) and (rot_tol is None or rot <= rot_tol)
     if goal.type == "fingertips":
         fingers = {hand.finger_of(c.body) for c in state.contacts} - {None}
         if len(fingers) < len(hand.fingers):
@@ -97,16 +212,9 @@ def goal_reached(goal: Goal, state: GraspState, hand: HandKinematics,
         if not all(is_fingertip(hand, c) for c in state.contacts if hand.finger_of(c.body) is not None):
             return False
         return analysis(state).stationary(all_f(state)) is not None
-    sa = analysis(state)
     if goal.type == "combination":
-        assert goal.combination is not None
-        comb = goal.combination.upper()
-        if len(comb) != state.L:
-            return False
-        try:
-            return sa.summary(comb).feasible
-        except CTPError:
-            return False
+        return combination_reached(goal, state, analysis)
+    sa = analysis(state)
     comb = all_f(state)
     if goal.type == "active":
         return closure_is_active(sa, comb, dafc_samples)

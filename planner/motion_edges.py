@@ -21,11 +21,16 @@ from analysis.exceptions import CTPError
 from analysis.pose import Pose
 from analysis.scene import Disk, Sphere
 from analysis.torques import torque_set
+from planner.goals import pose_goal_remaining
 from planner.manifold import ContactManifold
 from planner.nodes import GraphNodes
 from planner.object_motion import ConstrainedObjectMotion, integrate_object_motion, keep_contacts, plan_object_motion
 from planner.state import GraspContact, GraspState
 from planner.transition import ObjectMotionFigures, Transition
+
+#: prefix of a rejection that is a limit of the planner, not of the grasp (lifted into the
+#: reason of a plan that was not found, :func:`planner.plan.plan`)
+UNSUPPORTED = "not supported: "
 
 
 def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Transition, GraspState]]:
@@ -45,9 +50,14 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
         subsets.append(())
     plans: list[tuple[tuple[int, ...], tuple[int, ...]]] = [(dset, ()) for dset in subsets]  # (D-set, S-set)
     slide = options.sliding_motions
-    if (goal.type == "pose" if slide is None else slide) and fixed and len(fixed) < L \
-            and isinstance(nodes.scene.object.shape, Disk | Sphere):
-        plans.append(((), fixed))
+    if (goal.type == "pose" if slide is None else slide) and fixed and len(fixed) < L:
+        shape = nodes.scene.object.shape
+        if isinstance(shape, Disk | Sphere):
+            plans.append(((), fixed))
+        else:  # said in the plan's reason (planner.plan), not silently left out
+            nodes.reject(f"{UNSUPPORTED}sliding the {shape.type} on the fixed bodies was not tried: object motions "
+                         "with sliding contacts (S) are followed for disk and sphere objects only, sliding on "
+                         f"fixed bodies (the object is a {shape.type})")
     for dset, sset in plans:
         comb = _letters(state, dset, sset)
         best = None
@@ -85,7 +95,7 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
             dist = min(options.clearance * size / float(np.min(rates)), 0.5 * size)
         elif goal.type == "pose":
             assert goal.pose is not None
-            dist = min(float(np.linalg.norm(np.asarray(goal.pose) - state.pose_vector())), options.motion_step * size)
+            dist = min(float(np.linalg.norm(pose_goal_remaining(goal, state))), options.motion_step * size)
         else:
             dist = options.motion_step * size
         keep = [i for i in range(L) if i not in dset and i not in sset]
@@ -134,7 +144,7 @@ def _slid_contacts(nodes: GraphNodes, state: GraspState, sset: tuple[int, ...],
         y, p_obj, n_obj = man.sliding_contact(k, x)
         ref = man.sliding[k]
         c = state.contacts[i]
-        out[i] = GraspContact(c.body, nodes.hand.to_local(ref, y, om.q_path[-1]), p_obj, n_obj, c.mu)
+        out[i] = GraspContact(c.body, nodes.hand.to_local(ref, y, om.q_path[-1]), p_obj, n_obj, c.mu, c.origin)
     return tuple(out)
 
 
@@ -147,7 +157,7 @@ def _direction_candidates(nodes: GraphNodes, state: GraspState, p: Any, dset: tu
     cands: list[Array] = []
     goal = nodes.goal
     if goal.type == "pose" and goal.pose is not None:
-        cands.append(np.asarray(goal.pose, float) - state.pose_vector())
+        cands.append(pose_goal_remaining(goal, state))
     if dset:
         # the object moves away from the D-contacts: along the sum of their inward normals
         v = np.zeros(D)

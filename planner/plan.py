@@ -7,8 +7,10 @@ returns a :class:`Plan`: ordered steps, each with its kind (``release``/``contac
 ``object_motion``, eq. 30-32), the combination in force, the joint-space and object paths, the
 torques (``tau_st`` of (18), the chosen member of T (32) and a summary of T) and the analysis
 figures that justify it. A plan that cannot be found is a :class:`Plan` with ``found = False`` and
-a ``reason`` naming the constraint that blocked the search; malformed input raises
-:class:`analysis.exceptions.SceneError`.
+a ``reason`` naming the constraint that blocked the search (first, a motion the planner does not
+support for this object, e.g. sliding a box); a start that already meets the goal is a found plan
+with no steps whose ``reason`` says so (:data:`START_MEETS_GOAL`); :attr:`Plan.outcome` (in the
+JSON too) tells the three apart. Malformed input raises :class:`analysis.exceptions.SceneError`.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import math
 import platform
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -29,8 +31,9 @@ from analysis.geometry import object_size, shape_signed_distance
 from analysis.kinematics import HandKinematics
 from analysis.pose import Pose
 from analysis.scene import Scene
-from planner.goals import Goal, goal_heuristic, goal_reached
+from planner.goals import Goal, check_combination, goal_heuristic, goal_reached
 from planner.graph import ContactStateGraph
+from planner.motion_edges import UNSUPPORTED
 from planner.options import PlannerOptions
 from planner.search import best_first_search
 from planner.state import GraspContact, GraspState, all_f, state_from_scene
@@ -40,6 +43,9 @@ Progress = Callable[[float, str], None]
 
 #: The kinds of plan steps: regrasps (eq. 33) and object motions (eq. 30-32).
 KINDS = ("release", "contact", "object_motion")
+
+#: The reason of a plan whose start already meets the goal (found, no steps).
+START_MEETS_GOAL = "the start already meets the goal: nothing to do (0 steps)"
 
 
 def _list(a: Array | None) -> Any:
@@ -233,6 +239,14 @@ class Plan:
     final_tau: Array | None = None
 
     @property
+    def outcome(self) -> str:
+        """``"reached"`` (found, with steps), ``"start_meets_goal"`` (found, no steps: the scene's
+        grasp already meets the goal) or ``"no_plan"`` (not found: ``reason`` says why)."""
+        if not self.found:
+            return "no_plan"
+        return "reached" if self.steps else "start_meets_goal"
+
+    @property
     def displacement(self) -> Array:
         """Planned object displacement (final pose vector minus start)."""
         return self.final_pose - self.start_pose
@@ -240,6 +254,7 @@ class Plan:
     def to_json(self) -> dict[str, Any]:
         return {
             "found": self.found,
+            "outcome": self.outcome,
             "reason": self.reason,
             "goal": self.goal.model_dump(exclude_none=True),
             "steps": [s.to_json() for s in self.steps],
@@ -266,7 +281,8 @@ class Plan:
         ``joint_path[-1]``, the object at ``object_path[-1]`` and the bodies ``contacts_after``
         at ``contact_points_after``, with the object's inward surface normal at each point and the
         scene's ``mu`` of that body (else the smallest; the file stores neither). A plan that was
-        not found reads back with ``found = False`` and may have no steps.
+        not found reads back with ``found = False`` and may have no steps, and so does a found plan
+        whose ``outcome`` is ``"start_meets_goal"``.
         """
         hand = hand or HandKinematics.from_scene(scene)
         D = scene.D
@@ -274,7 +290,8 @@ class Plan:
             raise SceneError(("steps",), "missing: this is not a plan (Plan.to_json / ctp plan --out)")
         found = data.get("found") is not False
         raw = data["steps"]
-        if not isinstance(raw, list) or (found and not raw):
+        at_goal = data.get("outcome") == "start_meets_goal"  # found with no steps
+        if not isinstance(raw, list) or (found and not raw and not at_goal):
             raise SceneError(("steps",), "must be a non-empty list of steps")
         poses = {}
         for key in ("start_pose", "final_pose"):
@@ -325,8 +342,7 @@ def check_goal(scene: Scene, goal: Goal) -> None:
     for i, w in enumerate(goal.wrenches or []):
         if len(w) != scene.D:
             raise SceneError(("goal", "wrenches", i), f"must have {scene.D} components")
-    if goal.combination is not None and any(ch not in "FNSDfnsd" for ch in goal.combination):
-        raise SceneError(("goal", "combination"), "letters must be F, N, S or D")
+    check_combination(goal, scene)
 
 
 def plan(
@@ -362,7 +378,8 @@ def plan(
         progress(min(0.99, frac), f"expanded {n}: contacts {graph.states[node].describe()}")
 
     def is_goal(node: Any) -> bool:
-        return goal_reached(goal, graph.states[node], hand, graph.analysis, graph.options.dafc_samples)
+        return goal_reached(goal, graph.states[node], hand, graph.analysis, graph.options.dafc_samples,
+                            size=graph.size)
 
     def heuristic(node: Any) -> float:
         return goal_heuristic(goal, graph.states[node], hand, graph.options.heuristic_weight)
@@ -375,7 +392,16 @@ def plan(
         result = best_first_search(key, graph.successors, is_goal, rejections=graph.rejections,
                                    max_expansions=max_expansions, time_limit=time_limit, progress=report,
                                    heuristic=heuristic)
-        reason = "goal reached" if result.found else result.blocking_reason()
+        if not result.found:
+            limits = sorted(k for k in result.rejections if k.startswith(UNSUPPORTED))
+            others = {k: v for k, v in result.rejections.items() if k not in limits}
+            reason = replace(result, rejections=others).blocking_reason()
+            if limits:  # a limit of the planner, not of the grasp: said first
+                reason = "; ".join(limits) + "; " + reason
+        elif len(result.path) == 1:
+            reason = START_MEETS_GOAL
+        else:
+            reason = "goal reached"
     total = time.perf_counter() - t0
     tm = graph.timings
     busy = tm["analysis"] + tm["ompl"] + tm["ik"] + tm["motion"]

@@ -47,6 +47,10 @@ class GraspContact:
     point_object: Array  # (d,)
     normal_object: Array  # (d,)
     mu: float
+    #: index of the scene contact this one is (kept through releases of other fingers and object
+    #: motions, moved along when it slides); None for a contact made during the plan, and in
+    #: states rebuilt from a plan file (which does not store it). Not part of the node key.
+    origin: int | None = None
 
     def key(self) -> tuple[Any, ...]:
         return (self.body, tuple(np.round(self.point_object, KEY_DECIMALS).tolist()))
@@ -119,7 +123,7 @@ def state_from_scene(scene: Scene, hand: HandKinematics | None = None) -> GraspS
     R = object_rotation(scene)
     p_o = object_origin(scene)
     contacts = []
-    for c in scene.contacts:
+    for i, c in enumerate(scene.contacts):
         ref = hand.resolve_body(c.body)
         assert ref is not None  # validated by Scene
         p = np.asarray(c.point, dtype=float)
@@ -131,6 +135,7 @@ def state_from_scene(scene: Scene, hand: HandKinematics | None = None) -> GraspS
                 point_object=R[:d, :d].T @ (p - p_o),
                 normal_object=R[:d, :d].T @ (n / np.linalg.norm(n)),
                 mu=float(c.mu),
+                origin=i,
             )
         )
     return GraspState(tuple(contacts), hand.q0.copy(), p_o.copy(), R.copy(), d)

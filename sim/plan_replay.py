@@ -91,8 +91,18 @@ that deviation exceeds ``params.drop_rel * s``, when no contact pushes on the ob
 ``unloaded_time`` while some load is applied (a torque or the external wrench is non-zero), or
 when the state stops being finite. The run stops at a drop. Displacements are pose-vector
 differences (:meth:`analysis.pose.Pose.vector`: 2-D ``(x, y, theta)``, 3-D ``(p, rotation
-vector)``), the same definition as the plan's ``displacement``; the plan's tolerance is on
-``relative_error = |simulated - planned| / |planned|`` of the total displacement.
+vector)``), the same definition as the plan's ``displacement``.
+
+The outcome is measured on the final pose, position and rotation apart (:class:`PoseError`): the
+position error ``|p_sim - p_plan|`` in scene units (metres) and the rotation error, the angle of
+``R_plan^T R_sim`` in radians. Each is also given relative to the planned displacement, the
+planned translation ``t = |dp|`` and rotation angle ``theta``: the position error over
+``max(t, theta s, 0.01 s)`` and the rotation error over ``max(theta, t / s, 0.01)`` (``s`` the
+object size; a rotation ``e`` moves the object's surface by about ``e s``, so a plan that only
+translates judges its rotation error against ``t / s``, one that only rotates its position error
+against ``theta s``, and a plan that does not move the object at all against 1 % of its size).
+The replay is within ``tolerance`` when neither relative error exceeds it (and nothing was
+dropped); ``ctp simulate`` exits with code 3 otherwise.
 """
 
 from __future__ import annotations
@@ -147,10 +157,70 @@ class PlanSimulationOptions:
     settle_time: float = 0.02  # holding at the end of every step (and after the start ramp)
     motion_time: float = 2.0  # an object motion gives up after this long (then reported short)
     unloaded_time: float = 0.05  # no loaded contact for this long (while loaded) means dropped
-    tolerance: float = 0.05  # relative error of the total displacement the replay must meet
+    tolerance: float = 0.05  # relative position and rotation errors the replay must meet (PoseError)
 
 
 DEFAULT_OPTIONS = PlanSimulationOptions()
+
+
+#: the smallest planned motion the relative errors are taken against, in object sizes (position)
+#: and radians (rotation): a plan that does not move the object is judged against 1 % of its size
+REST_SCALE = 0.01
+
+
+@dataclass(frozen=True)
+class PoseError:
+    """How far a simulated pose ended from the planned one, position and rotation apart.
+
+    ``position`` (scene units) and ``rotation`` (radians) are the errors; ``planned_translation``
+    (scene units) and ``planned_rotation`` (radians) the planned motion they are judged against;
+    ``position_scale`` (scene units) and ``rotation_scale`` (radians) the planned motion's scales
+    of the module docstring, and ``relative_position`` and ``relative_rotation`` the errors over
+    them (no unit)."""
+
+    position: float
+    rotation: float
+    planned_translation: float
+    planned_rotation: float
+    position_scale: float
+    rotation_scale: float
+    relative_position: float
+    relative_rotation: float
+
+    @classmethod
+    def of(cls, start: Pose, planned: Pose, simulated: Pose, size: float) -> PoseError:
+        """The error of ``simulated`` against ``planned``, the planned motion from ``start``."""
+        pos = float(np.linalg.norm(simulated.position - planned.position))
+        rot = simulated.rotation_angle_to(planned)
+        t = float(np.linalg.norm(planned.position - start.position))
+        th = planned.rotation_angle_to(start)
+        return cls.of_errors(pos, rot, t, th, size)
+
+    @classmethod
+    def of_errors(cls, position: float, rotation: float, translation: float, turn: float, size: float) -> PoseError:
+        """From the errors and the planned translation and rotation angle (see the module docstring)."""
+        p_scale = max(translation, turn * size, REST_SCALE * size)
+        r_scale = max(turn, translation / size, REST_SCALE)
+        return cls(position, rotation, translation, turn, p_scale, r_scale, position / p_scale, rotation / r_scale)
+
+    @property
+    def relative(self) -> float:
+        """The larger of the two relative errors."""
+        return max(self.relative_position, self.relative_rotation)
+
+    def to_json(self) -> dict[str, float]:
+        return {"position_error": self.position, "rotation_error": self.rotation,
+                "planned_translation": self.planned_translation, "planned_rotation": self.planned_rotation,
+                "position_scale": self.position_scale, "rotation_scale": self.rotation_scale,
+                "relative_position_error": self.relative_position,
+                "relative_rotation_error": self.relative_rotation}
+
+    def describe(self, tolerance: float) -> str:
+        """One line: both errors with their units and relative values."""
+        return (f"position error {self.position:.3g} m ({self.relative_position:.2%} of {self.position_scale:.3g} m), "
+                f"rotation error {self.rotation:.3g} rad ({self.relative_rotation:.2%} of "
+                f"{self.rotation_scale:.3g} rad); planned {self.planned_translation:.3g} m and "
+                f"{self.planned_rotation:.3g} rad; tolerance {tolerance:.0%} each")
 
 
 @dataclass(frozen=True)
@@ -206,18 +276,17 @@ class PlanSimulation:
         return np.asarray(self.simulated_final_pose - self.start_pose)
 
     @property
-    def relative_error(self) -> float:
-        """``|simulated - planned| / |planned|`` of the total displacement (absolute if none planned)."""
-        n = float(np.linalg.norm(self.planned))
-        err = float(np.linalg.norm(self.simulated - self.planned))
-        return err / n if n > 0 else err
+    def error(self) -> PoseError:
+        """Position (scene units) and rotation (radians) error of the final pose, each also
+        relative to the planned displacement (:class:`PoseError`)."""
+        d = len(self.start_pose) // 3 + 1  # D = 3 (2-D) or 6 (3-D)
+        return PoseError.of(Pose.from_vector(self.start_pose, d), Pose.from_vector(self.planned_final_pose, d),
+                            Pose.from_vector(self.simulated_final_pose, d), self.object_size)
 
     @property
-    def final_pose_error(self) -> float:
-        """``|simulated final pose - planned final pose|`` as a fraction of ``|planned displacement|``."""
-        n = float(np.linalg.norm(self.planned))
-        err = float(np.linalg.norm(self.simulated_final_pose - self.planned_final_pose))
-        return err / n if n > 0 else err
+    def relative_error(self) -> float:
+        """The larger of the relative position and rotation errors of the final pose (no unit)."""
+        return self.error.relative
 
     @property
     def max_regrasp_deviation(self) -> float:
@@ -231,13 +300,14 @@ class PlanSimulation:
 
     @property
     def ok(self) -> bool:
-        """Not dropped and within ``tolerance`` of the planned displacement."""
+        """Not dropped, and the position and the rotation each within ``tolerance`` of the
+        planned displacement (:attr:`error`)."""
         return (not self.dropped) and len(self.steps) > 0 and self.relative_error <= self.tolerance
 
     def to_json(self) -> dict[str, Any]:
         return {
             "ok": self.ok, "dropped": self.dropped, "drop_reason": self.drop_reason,
-            "relative_error": self.relative_error, "final_pose_error": self.final_pose_error,
+            "relative_error": self.relative_error, **self.error.to_json(),
             "tolerance": self.tolerance, "planned": self.planned.tolist(), "simulated": self.simulated.tolist(),
             "start_pose": self.start_pose.tolist(), "planned_final_pose": self.planned_final_pose.tolist(),
             "simulated_final_pose": self.simulated_final_pose.tolist(),
@@ -552,6 +622,7 @@ __all__ = [
     "DEFAULT_OPTIONS",
     "PlanSimulation",
     "PlanSimulationOptions",
+    "PoseError",
     "StepSimulation",
     "simulate_plan",
 ]

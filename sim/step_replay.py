@@ -12,6 +12,10 @@ Each step is replayed from its own planned state (the scene of the state before 
   planned distance (``stop_distance``); its displacement is compared with the planned one.
 
 The object's total displacement is the sum of the steps' displacements, compared with the plan's.
+Errors are position (scene units) and rotation (radians) apart, each relative to the planned
+motion as in :class:`sim.plan_replay.PoseError` (a step: its end pose against the planned one; the
+total: the summed translations, and the summed rotation coordinates, exact in 2-D and to first
+order in 3-D, where the steps' rotations are small).
 ``simulate_torques`` restarts from a scene, so the steps are chained through the planned states,
 not through the simulated ones: this checks every step's physics, not the drift of a whole run.
 The whole run, one simulation through every step, is :func:`sim.plan_replay.simulate_plan`.
@@ -26,9 +30,11 @@ import numpy as np
 from analysis._types import Array
 from analysis.geometry import object_size
 from analysis.kinematics import HandKinematics
+from analysis.pose import Pose
 from analysis.scene import Scene
 from planner.plan import Plan
 from planner.state import StateAnalysis, all_f, state_scene
+from sim.plan_replay import PoseError
 from sim.torque_replay import simulate_torques
 
 
@@ -41,6 +47,7 @@ class StepReplay:
     dropped: bool
     ok: bool
     note: str
+    error: PoseError | None = None  # object motions: the end pose against the planned one
 
 
 @dataclass(frozen=True)
@@ -48,13 +55,22 @@ class PlanReplay:
     steps: tuple[StepReplay, ...]
     planned: Array  # (D,) total planned displacement
     simulated: Array  # (D,)
+    size: float = 1.0  # object size (analysis.geometry.object_size)
+    dim: int = 2
+
+    @property
+    def error(self) -> PoseError:
+        """Position and rotation error of the total displacement (see the module docstring)."""
+        d = self.dim
+        return PoseError.of_errors(float(np.linalg.norm(self.simulated[:d] - self.planned[:d])),
+                                   float(np.linalg.norm(self.simulated[d:] - self.planned[d:])),
+                                   float(np.linalg.norm(self.planned[:d])), float(np.linalg.norm(self.planned[d:])),
+                                   self.size)
 
     @property
     def relative_error(self) -> float:
-        """``|simulated - planned| / |planned|`` of the total displacement."""
-        n = float(np.linalg.norm(self.planned))
-        return float(np.linalg.norm(self.simulated - self.planned)) / n if n > 0 else float(
-            np.linalg.norm(self.simulated))
+        """The larger of the relative position and rotation errors of the total displacement."""
+        return self.error.relative
 
     @property
     def dropped(self) -> bool:
@@ -66,8 +82,9 @@ class PlanReplay:
 
 
 def replay_plan(scene: Scene, plan: Plan, hold_time: float = 0.1, hold_tol: float = 0.01,
-                motion_time: float = 2.0) -> PlanReplay:
-    """Replay every step of a found plan in MuJoCo (see the module docstring)."""
+                motion_time: float = 2.0, tolerance: float = 0.05) -> PlanReplay:
+    """Replay every step of a found plan in MuJoCo (see the module docstring); an object motion
+    is ``ok`` when its relative position and rotation errors are each within ``tolerance``."""
     if not plan.found:
         raise ValueError("only a found plan can be replayed")
     hand = HandKinematics.from_scene(scene)
@@ -81,13 +98,16 @@ def replay_plan(scene: Scene, plan: Plan, hold_time: float = 0.1, hold_tol: floa
         if t.kind == "object_motion":
             sc = state_scene(scene, step.before, hand)
             assert t.tau is not None
-            dist = float(np.linalg.norm(planned))
+            dist = float(np.linalg.norm(planned))  # |dr|, the stop distance of simulate_torques
+            error: PoseError | None = None
             res = simulate_torques(sc, t.tau, duration=motion_time, combination=t.combination, stop_distance=dist)
             sim = np.asarray(res.dr, dtype=float)
-            err = float(np.linalg.norm(sim - planned)) / max(dist, 1e-12)
-            ok = (not res.dropped) and err <= 0.05
-            note = f"relative error {err:.3f}"
+            start = Pose.from_vector(t.object_path[0], scene.dim)
+            error = PoseError.of(start, Pose.from_vector(t.object_path[-1], scene.dim), start.displaced(sim), size)
+            ok = (not res.dropped) and error.relative <= tolerance
+            note = error.describe(tolerance)
         else:
+            error = None
             sc = state_scene(scene, step.after, hand)
             sa = StateAnalysis.of(scene, step.after, hand)
             grasp = sa.stationary(all_f(step.after))
@@ -99,5 +119,5 @@ def replay_plan(scene: Scene, plan: Plan, hold_time: float = 0.1, hold_tol: floa
             note = f"held: moved {moved:.2e}"
         total_sim += sim
         total_plan += planned
-        out.append(StepReplay(step.index, t.kind, planned, sim, bool(res.dropped), bool(ok), note))
-    return PlanReplay(tuple(out), total_plan, total_sim)
+        out.append(StepReplay(step.index, t.kind, planned, sim, bool(res.dropped), bool(ok), note, error))
+    return PlanReplay(tuple(out), total_plan, total_sim, size, scene.dim)

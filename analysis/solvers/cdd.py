@@ -213,3 +213,20 @@ def reduce_generators(g: Generators) -> Generators:
         _clean(_unit_rows(np.array(rays).reshape(-1, n))),
         _clean(_unit_rows(np.array(lines).reshape(-1, n))),
     )
+
+
+def generators_to_inequalities(g: Generators) -> tuple[Array, Array, bool]:
+    """H-representation ``A x <= b`` of ``conv(vertices) + cone(rays) + span(lines)``:
+    ``(A (m, n), b (m,), has_equalities)``; ``has_equalities`` when the set lies in a hyperplane."""
+    n = g.vertices.shape[1] if g.vertices.size else g.rays.shape[1]
+    rows = [[1.0, *v] for v in g.vertices] + [[0.0, *r] for r in g.rays]
+    lin = list(range(len(rows), len(rows) + len(g.lines)))
+    rows += [[0.0, *ln] for ln in g.lines]
+    try:
+        mat = cdd.matrix_from_array(rows, lin_set=lin, rep_type=cdd.RepType.GENERATOR)
+        H = cdd.copy_inequalities(cdd.polyhedron_from_matrix(mat))  # rows [b, -A]: b - A x >= 0
+    except (RuntimeError, ValueError) as e:
+        raise SolverError("cdd", str(e)) from e
+    arr = np.array(H.array, dtype=float).reshape(-1, n + 1)
+    keep = np.any(arr[:, 1:] != 0.0, axis=1)
+    return -arr[keep, 1:], arr[keep, 0], bool(H.lin_set)

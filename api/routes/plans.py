@@ -13,6 +13,7 @@ from api.deps import RunnerDep, SettingsDep, StoreDep, check_raw_hand_size, chec
 from api.errors import ApiError
 from api.routes import _jobs
 from api.schemas import ErrorBody, JobList, JobStatus, PlanCreate, PlanPublic
+from planner.goals import check_combination
 
 router = APIRouter(prefix="/plans", tags=["plans"])
 KIND, WHAT = "plan", "plan"
@@ -31,6 +32,7 @@ def create_plan(raw: Annotated[PlanCreate, SkipValidation], settings: SettingsDe
                             f"letters; the scene has {len(body.scene.contacts)} contacts",
                        errors=[{"loc": ["goal", "combination"], "msg": "one letter per contact",
                                 "type": "value_error"}])
+    check_combination(body.goal, body.scene)  # letters that fit each contact's friction (SceneError: 422)
     if body.goal.pose is not None and len(body.goal.pose) != body.scene.D:
         raise ApiError(422, f"goal.pose: has {len(body.goal.pose)} values; a {body.scene.dim}-D object needs "
                             f"{body.scene.D}",
@@ -62,7 +64,11 @@ def get_plan(plan_id: str, store: StoreDep) -> dict[str, Any]:
 @router.get("/{plan_id}/result", responses={**_jobs.ERRORS, 409: {"model": ErrorBody,
                                                                    "description": "not finished or failed"}})
 def get_plan_result(plan_id: str, store: StoreDep) -> dict[str, Any]:
-    """The plan: ``steps`` (kind, combination, joint and object paths, torques), ``found``, ``reason``."""
+    """The plan: ``steps`` (kind, combination, joint and object paths, torques), and at the top level
+    ``found``, ``outcome`` and ``reason``. A job that ran to its end succeeded whether or not a plan
+    was found: a plan that was not found has ``found: false``, ``outcome: "no_plan"``, no steps and
+    a ``reason`` naming what blocked it; a start that already meets the goal has ``found: true``,
+    ``outcome: "start_meets_goal"`` and no steps; otherwise ``outcome: "reached"``."""
     return _jobs.result(store, KIND, plan_id, WHAT)
 
 

@@ -102,7 +102,8 @@ def test_analysis_of_one_combination(client: TestClient) -> None:
         (lambda s: s["contacts"][0].__setitem__("point", [0.1, 0.2, 0.3]), "scene.contacts.0.point"),
         (lambda s: s["fingers"][0]["links"][0].__setitem__("length", -1), "scene.fingers.0.links.0.length"),
         (lambda s: s.__setitem__("dim", 4), "scene.dim"),
-        (lambda s: s.pop("contacts"), "scene.contacts"),
+        # contacts omitted are found from the geometry (issue 10); here the object touches nothing
+        (lambda s: (s.pop("contacts"), s["object"]["pose"].__setitem__("position", [0.0, 3.0])), "scene.contacts"),
         (lambda s: s["object"]["shape"].__setitem__("radius", "big"), "scene.object.shape.radius"),
     ],
 )
@@ -310,6 +311,32 @@ def test_plan_life_cycle(client: TestClient) -> None:
     else:
         assert done["error"]
         assert client.get(f"/plans/{done['id']}/result").status_code == 409
+
+
+def test_plan_job_without_a_plan_says_found_false_and_why(client: TestClient) -> None:
+    """The job ran to its end (succeeded); its result says at the top level that no plan was found
+    and why, with no steps."""
+    scene = copy.deepcopy(PLANAR)
+    scene["contacts"] = [c for c in scene["contacts"] if c["body"] == "palm"]
+    scene["external_wrench"] = [1.0, 0.0, 0.0]  # pushed sideways off the palm: nothing holds it
+    r = client.post("/plans", json={"scene": scene, "goal": {"type": "active"}})
+    assert r.status_code == 202, r.text
+    done = wait_for(client, r.json()["url"], timeout=120)
+    assert done["status"] == "succeeded", done
+    plan = client.get(done["result_url"]).json()
+    assert plan["found"] is False and plan["outcome"] == "no_plan" and plan["steps"] == []
+    assert "no stationary grasp (18)" in plan["reason"]
+
+
+def test_plan_goal_tolerances_and_letters_are_validated(client: TestClient) -> None:
+    goal = {"type": "pose", "pose": [0.0, 0.55, 0.0]}
+    for field, value in (("position_tolerance", -0.01), ("rotation_tolerance", "loose")):
+        r = client.post("/plans", json={"scene": PLANAR, "goal": {**goal, field: value}})
+        assert r.status_code == 422 and r.json()["detail"].startswith(f"goal.{field}"), r.text
+    # a combination letter that does not fit its contact (N on a contact with friction)
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "combination", "combination": "NFFFD"}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("goal.combination"), r.text
+    assert "letter 0 is N" in r.json()["detail"]
 
 
 # -- limits, cancellation, recovery (an app with tight limits) ---------------------------------

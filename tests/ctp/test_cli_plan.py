@@ -37,3 +37,60 @@ def test_ctp_plan_replay_writes_the_continuous_replay(tmp_path) -> None:  # type
 def test_ctp_plan_bad_goal_exits_2() -> None:
     r = CliRunner().invoke(app, ["plan", str(EXAMPLES / "planar_disk_envelope.json"), "--goal", "combination"])
     assert r.exit_code == 2
+
+
+BOX = EXAMPLES / "baxter_hug_box.json"
+
+
+def test_ctp_plan_combination_not_reached_is_no_plan_exit_1() -> None:
+    # FFFFDD: the table contacts released. The start (FFFFFF, table touching) does not meet it.
+    r = CliRunner().invoke(app, ["plan", str(BOX), "--goal", "combination", "--combination", "FFFFDD",
+                                 "--time-limit", "2"])
+    assert r.exit_code == 1, r.output
+    assert "no plan:" in r.output and "goal reached" not in r.output
+
+
+def test_ctp_plan_goal_met_at_the_start_says_so(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "plan.json"
+    r = CliRunner().invoke(app, ["plan", str(BOX), "--goal", "combination", "--combination", "FFFFFF",
+                                 "--out", str(out), "--replay"])
+    assert r.exit_code == 0, r.output
+    assert "goal met at the start" in r.output and "already meets the goal" in r.output
+    assert "nothing to replay" in r.output
+    data = json.loads(out.read_text())
+    assert data["found"] is True and data["outcome"] == "start_meets_goal" and data["steps"] == []
+
+
+def test_ctp_plan_pose_tolerances(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    out = tmp_path / "plan.json"
+    # a 3 cm lift of the box is not met at the start with the default tolerances ...
+    x, y, z = load_scene(BOX).object.pose.position
+    lift = f"{x} {y} {z + 0.03} 0 0 0"
+    r = CliRunner().invoke(app, ["plan", str(BOX), "--goal", "pose", "--pose", lift, "--time-limit", "1",
+                                 "--out", str(out)])
+    assert "already meets the goal" not in r.output
+    assert r.exit_code == 1, r.output
+    goal = json.loads(out.read_text())["goal"]
+    assert goal == {"type": "pose", "pose": [x, y, z + 0.03, 0.0, 0.0, 0.0]}
+    # ... and is, with a position tolerance of 3.5 cm (metres) and the rotation free
+    r = CliRunner().invoke(app, ["plan", str(BOX), "--goal", "pose", "--pose", lift, "--position-tolerance",
+                                 "0.035", "--rotation-tolerance", "free", "--out", str(out)])
+    assert r.exit_code == 0 and "already meets the goal" in r.output, r.output
+    goal = json.loads(out.read_text())["goal"]
+    assert goal["position_tolerance"] == 0.035 and goal["rotation_tolerance"] == "free"
+
+
+def test_ctp_plan_bad_tolerances_exit_2() -> None:
+    base = ["plan", str(BOX), "--goal", "pose", "--pose", "0.5 0 1 0 0 0"]
+    r = CliRunner().invoke(app, [*base, "--rotation-tolerance", "loose"])
+    assert r.exit_code == 2 and "rotation-tolerance" in r.output, r.output
+    r = CliRunner().invoke(app, [*base, "--position-tolerance", "-0.01"])
+    assert r.exit_code == 2 and "goal.position_tolerance" in r.output, r.output
+    r = CliRunner().invoke(app, ["plan", str(BOX), "--goal", "combination", "--combination", "FFFFD"])
+    assert r.exit_code == 2 and "goal.combination" in r.output and "6 contacts" in r.output, r.output
+
+
+def test_ctp_plan_and_simulate_document_their_exit_codes() -> None:
+    for cmd in ("plan", "simulate"):
+        r = CliRunner().invoke(app, [cmd, "--help"])
+        assert r.exit_code == 0 and "Exit codes" in r.output and "3" in r.output, r.output

@@ -55,7 +55,7 @@ def test_plan_json(planar_plan, tmp_path) -> None:  # type: ignore[no-untyped-de
 
 
 def test_no_path_is_a_result_naming_the_block(planar_scene: Scene) -> None:
-    p = plan(planar_scene, Goal(type="combination", combination="FFFFFFFFFF"), max_expansions=2)
+    p = plan(planar_scene, Goal(type="combination", combination="DDDDD"), max_expansions=2)
     assert not p.found and p.steps == () and "node limit" in p.reason
 
 
@@ -78,7 +78,7 @@ def test_malformed_input_raises(planar_scene: Scene) -> None:
 
 def test_progress_is_reported(planar_scene: Scene) -> None:
     seen: list[tuple[float, str]] = []
-    p = plan(planar_scene, Goal(type="combination", combination="FFFFFFFFFF"), max_expansions=3,
+    p = plan(planar_scene, Goal(type="combination", combination="DDDDD"), max_expansions=3,
              progress=lambda f, m: seen.append((f, m)))
     assert not p.found
     fr = [f for f, _ in seen]
@@ -151,7 +151,7 @@ def test_plan_from_json_inverts_to_json(planar_scene: Scene, planar_plan) -> Non
 def test_plan_from_json_reads_a_plan_that_was_not_found(planar_scene: Scene) -> None:
     from planner.plan import Plan
 
-    p = plan(planar_scene, Goal(type="combination", combination="FFFFFFFFFF"), max_expansions=2)
+    p = plan(planar_scene, Goal(type="combination", combination="DDDDD"), max_expansions=2)
     data = _json(p.to_json())
     back = Plan.from_json(data, planar_scene)
     assert not back.found and back.steps == () and back.reason == p.reason

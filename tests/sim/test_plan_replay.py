@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 
 from analysis.geometry import object_size
 from analysis.kinematics import HandKinematics
+from analysis.pose import Pose
 from analysis.scene import Scene
 from ctp.cli import app
 from planner.plan import Plan
@@ -151,3 +152,57 @@ def test_final_holding_torque_rebuilt_from_the_file_equals_the_planners(planar_s
     rebuilt = final_holding_torque(planar_scene, hand, steps[-1])
     assert planar_plan.final_tau is not None and rebuilt is not None
     np.testing.assert_allclose(rebuilt, planar_plan.final_tau, atol=1e-8)
+
+
+# --------------------------------------------------------------------------------------------
+# The outcome: position and rotation errors apart, with units; off tolerance exits 3
+
+
+def test_pose_error_keeps_metres_and_radians_apart() -> None:
+    from sim.plan_replay import PoseError
+
+    start = Pose.from_vector([0.0, 0.5, 0.0], 2)
+    planned = Pose.from_vector([0.0, 0.52, 0.0], 2)  # a 2 cm lift, no rotation
+    sim = Pose.from_vector([0.001, 0.52, 0.002], 2)  # 1 mm aside, turned by 2 mrad
+    e = PoseError.of(start, planned, sim, size=0.5)
+    assert e.position == pytest.approx(0.001) and e.rotation == pytest.approx(0.002)
+    assert e.planned_translation == pytest.approx(0.02) and e.planned_rotation == pytest.approx(0.0)
+    assert e.relative_position == pytest.approx(0.05)  # of the 2 cm planned
+    assert e.relative_rotation == pytest.approx(0.002 / (0.02 / 0.5))  # of the turn that moves the surface 2 cm
+    turn = PoseError.of(start, Pose.from_vector([0.0, 0.5, 0.3], 2), Pose.from_vector([0.0, 0.5, 0.33], 2), 0.5)
+    assert turn.rotation == pytest.approx(0.03) and turn.relative_rotation == pytest.approx(0.1)
+    assert turn.position == 0.0 and turn.relative_position == 0.0
+    text = e.describe(0.05)
+    assert "position error 0.001 m" in text and "rotation error 0.002 rad" in text
+
+
+def test_planar_continuous_replay_reports_both_errors(planar_scene: Scene, planar_continuous) -> None:  # type: ignore[no-untyped-def]
+    r = planar_continuous
+    data = r.to_json()
+    pos = float(np.linalg.norm(r.simulated_final_pose[:2] - r.planned_final_pose[:2]))
+    rot = abs(float(r.simulated_final_pose[2] - r.planned_final_pose[2]))
+    assert data["position_error"] == pytest.approx(pos, abs=1e-12)
+    assert data["rotation_error"] == pytest.approx(rot, abs=1e-9)
+    assert data["relative_position_error"] <= 0.05 and data["relative_rotation_error"] <= 0.05
+    assert data["relative_error"] == max(data["relative_position_error"], data["relative_rotation_error"])
+    assert "final_pose_error" not in data  # the older figure that added metres to radians
+
+
+def test_ctp_simulate_off_tolerance_exits_3(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """A replay that ends 20 % short of the plan's lift: 'NOT within tolerance', exit code 3, the
+    position error in metres and the rotation error in radians."""
+    data = _plan_dict(tmp_path)
+    lift = data["final_pose"][1] - data["start_pose"][1]
+    assert lift > 0.0
+    data["final_pose"][1] += 0.2 * lift  # the file claims a 20 % higher lift than its steps make
+    bad = tmp_path / "claims_more.json"
+    bad.write_text(json.dumps(data))
+    out = tmp_path / "replay.json"
+    r = CliRunner().invoke(app, ["simulate", str(bad), "--json", str(out)])
+    assert r.exit_code == 3, r.output
+    assert "NOT within tolerance" in r.output and "dropped: no" in r.output
+    assert " m (" in r.output and " rad (" in r.output, r.output
+    rep = json.loads(out.read_text())
+    assert not rep["ok"] and not rep["dropped"]
+    assert rep["relative_position_error"] > 0.1 and rep["relative_rotation_error"] <= 0.05
+    assert rep["position_error"] == pytest.approx(0.2 * lift, rel=0.3)
