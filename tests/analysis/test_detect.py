@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from analysis.detect import FEATURE_TOL, UnplacedScene, detect_contacts
+from analysis.detect import FEATURE_TOL, Detection, UnplacedScene, detect_contacts
 from analysis.exceptions import SceneError
 from analysis.geometry import box_signed_distance
 from analysis.kinematics import segment_distance
@@ -185,15 +185,23 @@ def test_cylinder_standing_on_a_table_gives_its_rim_polygon() -> None:
     assert got == [(0.0, -0.1, 0.0), (0.0, 0.1, 0.0)]
 
 
-def test_planar_example_contacts_are_found_back() -> None:
-    data = json.loads(PLANAR.read_text())
+def _found_back(path: Path) -> tuple[dict[str, Any], list[dict[str, Any]], Detection]:
+    """The scene at ``path`` without its contacts, its bundled contacts, and what the detector finds:
+    the same bodies in the same order, points and normals within 1e-9 (the bundled contacts are
+    written to 10 decimals)."""
+    data = json.loads(path.read_text())
     bundled = data.pop("contacts")
     det = detect_contacts(UnplacedScene.model_validate(data))
     assert [k.body for k in det.contacts] == [c["body"] for c in bundled]
     for k, c in zip(det.contacts, bundled, strict=True):
-        # the bundled contacts are written to 10 decimals; the detector agrees to 1e-9
         np.testing.assert_allclose(k.point, c["point"], atol=1e-9)
         np.testing.assert_allclose(k.normal, c["normal"], atol=1e-9)
+    return data, bundled, det
+
+
+def test_planar_example_contacts_are_found_back() -> None:
+    data, bundled, det = _found_back(PLANAR)
+    for k, c in zip(det.contacts, bundled, strict=True):
         assert k.mu == c["mu"] and k.gap < 1e-9
     value: object
     for value in ("auto", []):
@@ -324,13 +332,7 @@ def _hull_distance(x: np.ndarray, P: np.ndarray) -> float:
 
 @pytest.mark.parametrize("name", ["sphere_four_finger_palm", "sphere_four_finger_wrap", "sphere_wrap_three_link"])
 def test_spatial_examples_contacts_are_found_back(name: str) -> None:
-    data = json.loads((ROOT / "examples" / f"{name}.json").read_text())
-    bundled = data.pop("contacts")
-    det = detect_contacts(UnplacedScene.model_validate(data))
-    assert [k.body for k in det.contacts] == [c["body"] for c in bundled]
-    for k, c in zip(det.contacts, bundled, strict=True):
-        np.testing.assert_allclose(k.point, c["point"], atol=1e-9)
-        np.testing.assert_allclose(k.normal, c["normal"], atol=1e-9)
+    _found_back(ROOT / "examples" / f"{name}.json")
 
 
 @pytest.mark.parametrize("name", ["baxter_hug_box_chains", "baxter_hug_box", "allegro_right_box"])
