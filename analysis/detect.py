@@ -6,11 +6,18 @@ checks use):
 
 * a finger link is the capsule around its axis
   (:meth:`~analysis.kinematics.HandKinematics.body_segment`) of the link's radius (radius 0: the
-  bare segment);
+  bare segment), or, for a URDF finger with ``"link_geometry": "urdf"``, the URDF's own collision
+  shapes of the link (:func:`analysis.geometry.link_shapes`: boxes, spheres, cylinders, capsules,
+  meshes as their convex hulls); a link of several shapes has the contacts of each;
 * a fixed body is its shape in world coordinates (``segment``, ``box`` axis-aligned about its
   ``position``, ``disk``/``sphere`` about the origin, ``polygon``);
-* the object is its shape at its pose (``box``, ``sphere``, ``cylinder`` in 3-D; ``disk``,
-  ``box``, ``polygon`` in 2-D).
+* the object is its shape at its pose (``box``, ``sphere``, ``cylinder``, ``mesh`` (its convex
+  hull, :mod:`analysis.mesh`) in 3-D; ``disk``, ``box``, ``polygon`` in 2-D).
+
+:func:`link_distances` gives the signed distance of every link to the object and to every fixed
+body at any configuration, with the witness point and direction whose product with the point
+Jacobian is the distance's gradient: the placement (:mod:`analysis.placement`) and collision
+checks use the same geometry.
 
 A 2-D scene lies in the plane ``z = 0``: a disk is the sphere of its radius (its section by the
 plane is the disk), a box or polygon the prism over it (``|z| <= PRISM_HALF_HEIGHT``), so the
@@ -38,7 +45,8 @@ overlap), each lifted back onto ``F_o`` (so on the object's surface, exactly); o
 one contact is ``x_o``. Curved features (a sphere, a capsule's round end, a cylinder's side
 away from the axis) are single points; a cylinder's cap (where its rim is level to ``t``) is
 taken as the regular ``CAP_SIDES``-gon inscribed in its rim, its side line (where level to ``t``)
-as the segment between the rims.
+as the segment between the rims. A contact that two links of one finger give at the same point
+is kept once where one of them has length 0 (a fingertip sphere; see ``_distinct``).
 """
 
 from __future__ import annotations
@@ -51,9 +59,10 @@ from pydantic import Field
 
 from analysis._types import Array
 from analysis.exceptions import SceneError
-from analysis.geometry import body_normal_cone, object_normal_cone, object_pose
+from analysis.geometry import body_normal_cone, link_shapes, object_normal_cone, object_pose
 from analysis.kinematics import BodyRef, HandKinematics
-from analysis.scene import Box, Contact, Cylinder, Disk, FixedBody, Polygon, Scene, Segment, Sphere
+from analysis.mesh import hull_of, load_mesh
+from analysis.scene import Box, Contact, Cylinder, Disk, FixedBody, Mesh, Polygon, Scene, Segment, Sphere
 
 #: Default distance (scene units) within which two surfaces are in contact.
 DEFAULT_TOLERANCE = 1e-3
@@ -68,6 +77,10 @@ PRISM_HALF_HEIGHT = 1.0
 #: the validation's ``analysis.loader.GEOMETRY_TOL`` (a test keeps them equal; the loader
 #: imports this module, so it cannot be imported here).
 FEATURE_TOL = 1e-4
+#: Normals of one contact found twice (on two links that meet there) differ by at most this
+#: (the validation's ``NORMAL_CONE_TOL``): on a curved object the two witness points may differ
+#: by coal's accuracy.
+NORMAL_TOL = 1e-3
 #: Sides of the polygon inscribed in a cylinder's rim that stands for a flat cap in contact.
 CAP_SIDES = 8
 
@@ -77,9 +90,12 @@ __all__ = [
     "NEAR_FACTOR",
     "DetectedContact",
     "Detection",
+    "LinkDistance",
     "NearMiss",
     "UnplacedScene",
     "detect_contacts",
+    "link_distances",
+    "link_refs",
 ]
 
 
@@ -211,6 +227,9 @@ def _shape_solid(shape: object, R: Array, p: Array, dim: int, where: tuple[str |
     if isinstance(shape, Segment):
         a, b = (np.asarray(x, dtype=float) for x in shape.points)
         return _capsule(R @ _as3(a) + p, R @ _as3(b) + p, 0.0)
+    if isinstance(shape, Mesh):
+        hull = load_mesh(shape.file)
+        return _Solid(hull.geom, coal.Transform3s(R, p), "poly", (R @ hull.vertices.T).T + p)
     kind = getattr(shape, "type", type(shape).__name__)
     raise SceneError((*where, "type"), f"contacts cannot be detected on '{kind}' shapes "
                      "(box, sphere, cylinder, disk, polygon and segment can)")
@@ -451,19 +470,90 @@ def _contact_normal(scene: Scene, hand: HandKinematics, ref: BodyRef, x_o: Array
     return n, -n if u_o is None else u_o, n if u_b is None else u_b
 
 
-def _body_solids(scene: Scene, hand: HandKinematics) -> list[tuple[BodyRef, _Solid, float | None]]:
-    """Every body a contact can lie on, in scene order, with its coal body and friction (None:
-    the default)."""
-    out: list[tuple[BodyRef, _Solid, float | None]] = []
-    for i, (finger, model) in enumerate(zip(scene.fingers, hand.fingers, strict=True)):
-        mu = finger.mu
+def link_refs(scene: Scene, hand: HandKinematics) -> list[BodyRef]:
+    """Every finger link of the hand, in scene order (each finger's links from the root)."""
+    out: list[BodyRef] = []
+    for i, model in enumerate(hand.fingers):
         for name in model.body_names():
             ref = hand.resolve_body(name)
             assert ref is not None and ref.finger == i
-            a, b = hand.body_segment(ref, hand.q0)
-            out.append((ref, _capsule(a, b, hand.body_radius(ref)), mu))
+            out.append(ref)
+    return out
+
+
+def _coal_solid(geom: object, R: Array, t: Array) -> _Solid:
+    """A URDF collision shape placed in the world (a mesh: its convex hull)."""
+    tf = coal.Transform3s(R, t)
+    if isinstance(geom, coal.Sphere):
+        return _Solid(geom, tf, "round", t[None, :])
+    if isinstance(geom, coal.Box):
+        V = _box_vertices(np.zeros(3), np.asarray(geom.halfSide, dtype=float))
+        return _Solid(geom, tf, "poly", (R @ V.T).T + t)
+    if isinstance(geom, coal.Cylinder):
+        return _Solid(geom, tf, "cylinder", np.zeros((0, 3)), radius=float(geom.radius), axis=R[:, 2].copy(),
+                      centre=t.copy(), half_height=float(geom.halfLength))
+    if isinstance(geom, coal.Capsule):
+        e = float(geom.halfLength) * R[:, 2]
+        return _Solid(geom, tf, "capsule", np.array([t - e, t + e]), radius=float(geom.radius))
+    hull = hull_of(geom)  # a mesh or convex body; other shapes: SceneError from analysis.mesh
+    return _Solid(hull.geom, tf, "poly", (R @ hull.vertices.T).T + t)
+
+
+def _link_solids(hand: HandKinematics, ref: BodyRef, q: Array) -> list[_Solid]:
+    """The link's geometry at ``q``: its capsule, or its URDF collision shapes."""
+    shapes = link_shapes(hand, ref, q)
+    if shapes is not None:
+        return [_coal_solid(g, np.asarray(R, dtype=float), np.asarray(t, dtype=float)) for g, R, t in shapes]
+    a, b = hand.body_segment(ref, q)
+    return [_capsule(a, b, hand.body_radius(ref))]
+
+
+def _body_solids(scene: Scene, hand: HandKinematics, q: Array) -> list[tuple[BodyRef, list[_Solid], float | None]]:
+    """Every body a contact can lie on, in scene order, at the configuration ``q`` ``(M,)``, with
+    its coal bodies and friction (None: the default)."""
+    out: list[tuple[BodyRef, list[_Solid], float | None]] = []
+    for ref in link_refs(scene, hand):
+        assert ref.finger is not None
+        out.append((ref, _link_solids(hand, ref, q), scene.fingers[ref.finger].mu))
     for i, fb in enumerate(scene.fixed_bodies):
-        out.append((BodyRef(name=fb.name), _fixed_solid(fb, i, scene.dim), fb.mu))
+        out.append((BodyRef(name=fb.name), [_fixed_solid(fb, i, scene.dim)], fb.mu))
+    return out
+
+
+@dataclass(frozen=True)
+class LinkDistance:
+    """The signed distance ``distance`` (negative: penetration) of a finger link to ``target``
+    (``"object"`` or a fixed body's name) at a configuration, the witness point ``link_point``
+    ``(3,)`` on the link and the unit direction ``direction`` ``(3,)`` from the target to the link:
+    the derivative of the distance in the joints is ``direction @ J(link_point)`` (the link's
+    point Jacobian) wherever the nearest features do not switch."""
+
+    link: BodyRef
+    target: str
+    distance: float
+    link_point: Array
+    direction: Array
+
+
+def link_distances(scene: Scene, hand: HandKinematics, q: Array,
+                   links: list[BodyRef] | None = None) -> list[LinkDistance]:
+    """For each finger link (``links``, default every link in scene order) at the configuration
+    ``q`` ``(M,)``: its signed distance to the object and to every fixed body, with witness point
+    and direction (see :class:`LinkDistance`). The geometry is the detector's (and the
+    validation's): the link's capsule, the object and fixed bodies as their shapes."""
+    obj = _object_solid(scene)
+    fixed = [(fb.name, _fixed_solid(fb, i, scene.dim)) for i, fb in enumerate(scene.fixed_bodies)]
+    out: list[LinkDistance] = []
+    for ref in link_refs(scene, hand) if links is None else links:
+        solids = _link_solids(hand, ref, q)
+        if not solids:
+            continue
+        for name, target in [("object", obj), *fixed]:
+            d, _, x_b, u = min((_distance(target, solid) for solid in solids), key=lambda r: r[0])
+            if scene.dim == 2:
+                x_b[2] = u[2] = 0.0
+            nu = float(np.linalg.norm(u))
+            out.append(LinkDistance(ref, name, d, x_b, u / nu if nu > 0 else u))
     return out
 
 
@@ -476,8 +566,8 @@ def detect_contacts(scene: Scene, *, tolerance: float = DEFAULT_TOLERANCE, mu: f
     """Every contact between the object and the fixed bodies and finger links of ``scene`` at its
     configuration ``q`` (the scene's own ``contacts`` are ignored), within ``tolerance``, and the
     near misses (see the module docstring). A body's ``mu`` field, where given, overrides
-    ``mu``. SceneError for a non-positive tolerance, a negative ``mu`` or an object shape
-    without a detector (``mesh``)."""
+    ``mu``. SceneError for a non-positive tolerance, a negative ``mu``, or a mesh file that is
+    missing or not a mesh (at ``object.shape.file``)."""
     if not (np.isfinite(tolerance) and tolerance > 0):
         raise SceneError(("tolerance",), f"must be a positive number (got {tolerance})")
     if not (np.isfinite(mu) and mu >= 0):
@@ -488,20 +578,64 @@ def detect_contacts(scene: Scene, *, tolerance: float = DEFAULT_TOLERANCE, mu: f
     contacts: list[DetectedContact] = []
     near: list[NearMiss] = []
     nearest: tuple[str, float] | None = None
-    for ref, solid, body_mu in _body_solids(scene, hand):
-        d, x_o, x_b, u = _distance(obj, solid)
-        if nearest is None or d < nearest[1]:
-            nearest = (ref.name, d)
-        if d > tolerance:
-            if d < NEAR_FACTOR * tolerance:
-                near.append(NearMiss(ref.name, d, tuple(float(v) for v in x_o[:dim]),
-                                     tuple(float(v) for v in x_b[:dim])))
-            continue
-        if dim == 2:
-            x_o[2] = x_b[2] = 0.0
-        n, u_o, u_b = _contact_normal(scene, hand, ref, x_o, x_b, u, dim)
-        for p in _patch_points(obj, solid, n, u_o, u_b, x_o, min(tolerance, FEATURE_TOL), dim):
-            contacts.append(DetectedContact(
-                body=ref.name, point=_clean(p[:dim]), normal=_clean(n[:dim]),
-                mu=float(mu if body_mu is None else body_mu), gap=d))
-    return Detection(tuple(contacts), tuple(near), float(tolerance), nearest)
+    for ref, solids, body_mu in _body_solids(scene, hand, hand.q0):
+        for solid in solids:
+            d, x_o, x_b, u = _distance(obj, solid)
+            if nearest is None or d < nearest[1]:
+                nearest = (ref.name, d)
+            if d > tolerance:
+                if d < NEAR_FACTOR * tolerance:
+                    near.append(NearMiss(ref.name, d, tuple(float(v) for v in x_o[:dim]),
+                                         tuple(float(v) for v in x_b[:dim])))
+                continue
+            if dim == 2:
+                x_o[2] = x_b[2] = 0.0
+            n, u_o, u_b = _contact_normal(scene, hand, ref, x_o, x_b, u, dim)
+            for p in _patch_points(obj, solid, n, u_o, u_b, x_o, min(tolerance, FEATURE_TOL), dim):
+                contacts.append(DetectedContact(
+                    body=ref.name, point=_clean(p[:dim]), normal=_clean(n[:dim]),
+                    mu=float(mu if body_mu is None else body_mu), gap=d))
+    near = _nearest_misses(near, {c.body for c in contacts})
+    return Detection(tuple(_distinct(contacts, hand)), tuple(near), float(tolerance), nearest)
+
+
+def _nearest_misses(near: list[NearMiss], touching: set[str]) -> list[NearMiss]:
+    """One near miss per body (its nearest shape), none for a body that touches elsewhere."""
+    best: dict[str, NearMiss] = {}
+    for m in near:
+        if m.body not in touching and (m.body not in best or m.distance < best[m.body].distance):
+            best[m.body] = m
+    return [m for m in near if best.get(m.body) is m]
+
+
+def _distinct(contacts: list[DetectedContact], hand: HandKinematics) -> list[DetectedContact]:
+    """The contacts without the repeats that a link of length 0 makes: such a link (a fingertip
+    link, a wrist link between coinciding joint origins) is the sphere at the end of the link
+    before it, so where links of one finger give the same point (within ``FEATURE_TOL``) with the
+    same normal and one of them has length 0, the contact is kept once, on that link (the first
+    such). Links of positive length that share the sphere about their joint keep their contacts
+    (a line contact across the joint)."""
+
+    def point_link(body: str) -> bool:
+        ref = hand.resolve_body(body)
+        if ref is None or ref.finger is None:
+            return False
+        a, b = hand.body_segment(ref, hand.q0)
+        return bool(np.linalg.norm(np.asarray(b) - np.asarray(a)) == 0.0)
+
+    def same(c: DetectedContact, k: DetectedContact) -> bool:
+        return (k.body != c.body and hand.finger_of(k.body) is not None
+                and hand.finger_of(k.body) == hand.finger_of(c.body)
+                and float(np.linalg.norm(np.subtract(k.point, c.point))) <= FEATURE_TOL
+                and float(np.linalg.norm(np.subtract(k.normal, c.normal))) <= NORMAL_TOL)
+
+    out: list[DetectedContact] = []
+    for i, c in enumerate(contacts):
+        group = [k for k in contacts if same(c, k)]
+        points = [k for k in [*group, c] if point_link(k.body)]
+        if group and points:
+            first = min(points, key=contacts.index)
+            if contacts.index(first) != i:
+                continue
+        out.append(c)
+    return out

@@ -19,8 +19,9 @@ import numpy as np
 from analysis._types import Array
 from analysis.exceptions import SceneError
 from analysis.kinematics import BodyRef, HandKinematics, segment_distance
+from analysis.mesh import load_mesh, point_signed_distance, shape_cone
 from analysis.pose import Pose
-from analysis.scene import Box, Cylinder, Disk, Polygon, Scene, Segment, Sphere
+from analysis.scene import Box, Cylinder, Disk, Mesh, Polygon, Scene, Segment, Sphere
 
 
 def object_pose(scene: Scene) -> Pose:
@@ -42,7 +43,7 @@ def object_origin(scene: Scene) -> Array:
 def shape_signed_distance(shape: object, p_local: Array, dim: int) -> float | None:
     """Signed distance (negative inside) of a point given in the shape's frame.
 
-    ``None`` for shapes whose distance is not computed (meshes).
+    ``None`` for a mesh (it needs its file: :func:`object_signed_distance` reads it).
     """
     p = np.asarray(p_local, dtype=float)[:dim]
     if isinstance(shape, Disk | Sphere):
@@ -81,18 +82,44 @@ def box_signed_distance(P: Array, center: Array, half_extents: Array) -> Array:
 
 
 def object_signed_distance(scene: Scene, p: Array) -> float | None:
-    """Signed distance of the world point ``p`` to the object at its scene pose."""
+    """Signed distance of the world point ``p`` to the object at its scene pose (a mesh: its
+    convex hull, :mod:`analysis.mesh`)."""
     R = object_rotation(scene)[: scene.dim, : scene.dim]
     local = R.T @ (np.asarray(p, dtype=float) - object_origin(scene))
+    if isinstance(scene.object.shape, Mesh):  # its convex hull (SceneError for a bad file)
+        return load_mesh(scene.object.shape.file).signed_distance(local)
     return shape_signed_distance(scene.object.shape, local, scene.dim)
 
 
+def link_shapes(hand: HandKinematics, ref: BodyRef, q: Array) -> list[tuple[object, Array, Array]] | None:
+    """The URDF collision shapes of a finger link placed in the world at ``q``, as ``(coal shape,
+    R (3, 3), t (3,))``; ``None`` where the link is a capsule (its finger's ``link_geometry``)."""
+    if ref.finger is None:
+        return None
+    shapes = getattr(hand.fingers[ref.finger], "collision_shapes", None)
+    local = None if shapes is None else shapes(ref.link)
+    if local is None:
+        return None
+    R_l, p_l = hand.body_pose(ref, q)
+    return [(g, R_l @ R, p_l + R_l @ t) for g, R, t in local]
+
+
+def _nearest_shape(shapes: list[tuple[object, Array, Array]], x: Array) -> tuple[float, int]:
+    d = [point_signed_distance(g, R, t, x) for g, R, t in shapes]
+    k = int(np.argmin(d))
+    return float(d[k]), k
+
+
 def body_surface_distance(scene: Scene, hand: HandKinematics, ref: BodyRef, p: Array) -> float | None:
-    """Distance of ``p`` to the surface of a finger link (its axis inflated by the link radius)
-    or of a fixed body (given in world coordinates)."""
+    """Distance of ``p`` to the surface of a finger link (its axis inflated by the link radius, or
+    its URDF collision shapes: the nearest of them) or of a fixed body (given in world
+    coordinates). ``None`` for a URDF link without collision shapes."""
     if ref.finger is None:
         body = next(b for b in scene.fixed_bodies if b.name == ref.name)
         return shape_signed_distance(body.shape, np.asarray(p, dtype=float), scene.dim)
+    shapes = link_shapes(hand, ref, hand.q0)
+    if shapes is not None:
+        return _nearest_shape(shapes, np.asarray(p, dtype=float))[0] if shapes else None
     a, b = hand.body_segment(ref, hand.q0)
     return segment_distance(np.asarray(p, dtype=float), a, b) - hand.body_radius(ref)
 
@@ -169,7 +196,7 @@ def segment_normal_cone(p: Array, a: Array, b: Array, radius: float, tol: float)
 def shape_normal_cone(shape: object, p_local: Array, dim: int, tol: float) -> NormalCone | None:
     """Normal cone of a shape at ``p_local`` (its frame) ``(d,)``: the outward normals of every
     face, edge or vertex feature within ``tol`` of the point (so a point within ``tol`` of an edge
-    has the edge's cone). ``None`` for shapes without one here (meshes)."""
+    has the edge's cone). ``None`` for a mesh (:func:`object_normal_cone` reads its file)."""
     p = np.asarray(p_local, dtype=float)[:dim]
     if isinstance(shape, Disk | Sphere):
         r = float(np.linalg.norm(p))
@@ -206,16 +233,26 @@ def object_normal_cone(scene: Scene, p: Array, tol: float) -> NormalCone | None:
     """Normal cone of the object at the world point ``p``, in world coordinates."""
     R = object_rotation(scene)[: scene.dim, : scene.dim]
     local = R.T @ (np.asarray(p, dtype=float) - object_origin(scene))
+    if isinstance(scene.object.shape, Mesh):
+        return NormalCone(load_mesh(scene.object.shape.file).normal_cone(local, tol) @ R.T)
     cone = shape_normal_cone(scene.object.shape, local, scene.dim, tol)
     return None if cone is None else NormalCone(cone.generators @ R.T)
 
 
 def body_normal_cone(scene: Scene, hand: HandKinematics, ref: BodyRef, p: Array, tol: float) -> NormalCone | None:
     """Normal cone at ``p`` of a fixed body (given in world coordinates) or of a finger link (its
-    axis inflated by the link radius), in world coordinates."""
+    axis inflated by the link radius, or the nearest of its URDF collision shapes), in world
+    coordinates."""
     if ref.finger is None:
         body = next(b for b in scene.fixed_bodies if b.name == ref.name)
         return shape_normal_cone(body.shape, np.asarray(p, dtype=float), scene.dim, tol)
+    shapes = link_shapes(hand, ref, hand.q0)
+    if shapes is not None:
+        if not shapes:
+            return None
+        x = np.asarray(p, dtype=float)
+        _, k = _nearest_shape(shapes, x)
+        return NormalCone(shape_cone(*shapes[k], x, tol))
     a, b = hand.body_segment(ref, hand.q0)
     return segment_normal_cone(np.asarray(p, dtype=float), a, b, hand.body_radius(ref), tol)
 
@@ -231,4 +268,6 @@ def object_size(scene: Scene) -> float:
         return float(np.max(np.linalg.norm(np.asarray(shape.vertices, dtype=float), axis=1)))
     if isinstance(shape, Cylinder):
         return float(max(shape.radius, 0.5 * shape.height))
+    if isinstance(shape, Mesh):  # half the diagonal of the hull's bounding box
+        return 0.5 * float(np.linalg.norm(np.ptp(load_mesh(shape.file).vertices, axis=0)))
     raise SceneError(("object", "shape", "type"), f"no characteristic size for '{shape.type}' objects")

@@ -8,8 +8,9 @@ the first failing check of a contact is reported and the next contact is checked
 * the normal ``n`` has unit length (within ``UNIT_TOL``; the model normalised those off by at most
   ``NORMALISE_TOL``, with a note in ``Scene.notes``);
 * the body names a fixed body or a body ``"<finger>/<k>"`` (``"<finger>/<link>"`` for URDF);
-* the point ``p_C`` lies on the surface of its body (a link's axis inflated by its radius, or a
-  fixed body's shape) and on the object's surface, within ``GEOMETRY_TOL``;
+* the point ``p_C`` lies on the surface of its body (a link's axis inflated by its radius, the
+  link's URDF collision shapes where its finger says ``"link_geometry": "urdf"``, or a fixed
+  body's shape) and on the object's surface (a mesh: its convex hull), within ``GEOMETRY_TOL``;
 * the normal lies in the normal cones at ``p_C`` (:mod:`analysis.geometry`), within
   ``NORMAL_CONE_TOL`` (the sine of the angle to the cone): ``-n`` in the object's, and ``n`` in
   a link's within ``BODY_NORMAL_CONE_TOL`` (3 deg: link capsules model real links). At a smooth

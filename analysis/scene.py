@@ -142,8 +142,13 @@ class Cylinder(_Model):
 
 
 class Mesh(_Model):
+    """A convex body given by a mesh file (STL or OBJ; its convex hull is the object), 3-D:
+    ``file`` is a path (absolute or relative to the current folder) or
+    ``"example-robot-data:<path inside robots/>"``; read when the geometry is needed
+    (:mod:`analysis.mesh`), which names this field when the file is missing or not a mesh."""
+
     type: Literal["mesh"]
-    file: str
+    file: Annotated[str, Field(min_length=1)]
 
 
 class Segment(_Model):
@@ -261,6 +266,9 @@ class FingerURDF(_Model):
     link_radius: Annotated[float, Field(ge=0, allow_inf_nan=False)] = 0.0
     #: friction coefficient of contacts found on this body (``"contacts": "auto"``); default: the detector's
     mu: Annotated[float, Field(ge=0, le=MAX_MAGNITUDE, allow_inf_nan=False)] | None = None
+    #: the links' geometry: capsules of ``link_radius`` about their axes, or the URDF's own
+    #: ``<collision>`` shapes (meshes as their convex hulls, boxes, cylinders, spheres)
+    link_geometry: Literal["capsule", "urdf"] = "capsule"
 
 
 def _finger_kind(value: Any) -> str | None:
@@ -411,6 +419,8 @@ def _check_shapes_and_lengths(scene: Scene, err: Any) -> None:
     shape = scene.object.shape
     if dim == 2 and shape.type in ("sphere", "cylinder"):
         err(("object", "shape", "type"), f"'{shape.type}' is a 3-D shape; use disk/box/polygon", shape.type)
+    if dim == 2 and shape.type == "mesh":
+        err(("object", "shape", "type"), "'mesh' is a 3-D shape; use disk/box/polygon", shape.type)
     if dim == 3 and shape.type in ("disk", "polygon"):
         err(("object", "shape", "type"), f"'{shape.type}' is a 2-D shape; use sphere/box/cylinder",
             shape.type)
@@ -478,8 +488,19 @@ _clean_loc = clean_loc
 
 
 def scene_json_schema() -> dict[str, Any]:
-    """The JSON Schema of the scene format (``ctp schema``)."""
-    return Scene.model_json_schema()
+    """The JSON Schema of the scene format (``ctp schema``): ``contacts`` is the list of contacts,
+    or ``"auto"`` (also ``[]`` or omitted) to find them from the geometry (``ctp contacts``)."""
+    schema = Scene.model_json_schema()
+    listed = schema["properties"]["contacts"]
+    schema["properties"]["contacts"] = {
+        "title": listed.get("title", "Contacts"),
+        "description": "the contacts (order = letters of a combination string), or \"auto\" (or [], or omitted): "
+                       "found from the geometry at the scene's configuration",
+        "anyOf": [{k: v for k, v in listed.items() if k != "title"} | {"minItems": 0},
+                  {"const": "auto", "type": "string"}],
+    }
+    schema["required"] = [r for r in schema.get("required", []) if r != "contacts"]
+    return schema
 
 
 __all__ = [

@@ -22,7 +22,12 @@ a sphere).
 Only the revolute joints on the path are chain joints (``q`` has one angle per joint, in path
 order from the root). Continuous (unbounded revolute) joints are chain joints too: pinocchio
 represents them by ``(cos q, sin q)``. Prismatic or other joints on the path are locked at 0.
-Mesh geometry is not loaded; ``urdf.package_dirs`` is accepted for future geometry use.
+With ``"link_geometry": "urdf"`` the links' geometry is the URDF's own ``<collision>`` elements
+instead of the capsules: pinocchio builds the collision GeometryModel (meshes found through
+``urdf.package_dirs`` and example-robot-data's ``share`` folder), and :meth:`UrdfFinger.
+collision_shapes` hands each chain link's coal objects, placed in the link's frame, to
+:mod:`analysis.detect` (the one place that computes with them). Geometry of links off the chain
+(side links fixed to a chain link, other fingers) is not part of the finger.
 """
 
 from __future__ import annotations
@@ -81,9 +86,13 @@ def example_robot_data_dir() -> Path | None:
 
 
 def resolve_urdf_path(file: str) -> Path:
-    """Resolve ``urdf.file``: an absolute path, a path relative to the current directory, or
-    ``"example-robot-data:<path inside robots/>"``. Raise :class:`SceneError` at
-    ``("urdf", "file")`` when the file does not exist."""
+    """Resolve ``urdf.file``: an absolute path, a path relative to the current directory,
+    ``"example-robot-data:<path inside robots/>"``, or ``"robot:<sha256>/<path inside the
+    archive>"``: a robot uploaded to the service (``POST /robots``), kept in
+    ``<data folder>/robots/<sha256>/``, the data folder being the ``CTP_DATA_DIR`` environment
+    variable (the service's ``data_dir`` setting, which it exports) or ``ctp-data`` in the current
+    directory. Raise :class:`SceneError` at ``("urdf", "file")`` when the file does not exist
+    or would leave its folder (symbolic links resolved); the message never shows a server folder."""
     if file.startswith(ERD_PREFIX):
         sub = file[len(ERD_PREFIX) :].lstrip("/")
         root = example_robot_data_dir()
@@ -91,23 +100,51 @@ def resolve_urdf_path(file: str) -> Path:
             raise SceneError(
                 ("urdf", "file"), f"'{file}': the example-robot-data package is not installed"
             )
-        path = root / sub
-        # the file must stay inside the package's robots folder, symbolic links resolved (no
-        # '..', no link out of it); the message never shows the server's folders
-        try:
-            inside = path.resolve().is_relative_to(root.resolve())
-        except (OSError, RuntimeError):  # a symbolic-link loop
-            inside = False
-        if not inside or not path.is_file():
-            raise SceneError(("urdf", "file"), f"URDF file not found: '{file}' (no such file in "
-                                               "example-robot-data's robots folder)")
+        where = "example-robot-data's robots folder"
+    elif file.startswith("robot:"):
+        digest, _, sub = file[len("robot:") :].partition("/")
+        if len(digest) != 64 or any(c not in "0123456789abcdef" for c in digest) or not sub:
+            raise SceneError(("urdf", "file"), f"'{file}': an uploaded robot's file is "
+                                               "'robot:<sha256 of the archive, 64 hex digits>/<path inside it>'")
+        root = Path(os.environ.get("CTP_DATA_DIR") or "ctp-data").expanduser() / "robots" / digest
+        if not root.is_dir():
+            raise SceneError(("urdf", "file"), f"URDF file not found: '{file}' (no robot uploaded with "
+                                               f"the hash {digest})")
+        where = "the uploaded robot"
+    else:
+        path = Path(file).expanduser()
+        if not path.is_absolute():
+            path = Path.cwd() / path
+        if not path.is_file():
+            raise SceneError(("urdf", "file"), f"URDF file not found: '{file}' (looked at {path})")
         return path
-    path = Path(file).expanduser()
-    if not path.is_absolute():
-        path = Path.cwd() / path
-    if not path.is_file():
-        raise SceneError(("urdf", "file"), f"URDF file not found: '{file}' (looked at {path})")
+    path = root / sub
+    # the file must stay inside its folder, symbolic links resolved (no '..', no absolute path,
+    # no link out of it); the message never shows the server's folders
+    try:
+        inside = path.resolve().is_relative_to(root.resolve())
+    except (OSError, RuntimeError):  # a symbolic-link loop
+        inside = False
+    if not inside or not path.is_file():
+        raise SceneError(("urdf", "file"), f"URDF file not found: '{file}' (no such file in {where})")
     return path
+
+
+def _upload_package_dirs(file: str, path: Path) -> list[str]:
+    """For an uploaded robot (``robot:<sha256>/...``): the folders in which its ``package://``
+    meshes are looked up, its archive's top folder and the folders one and two levels below it
+    (``package://<name>/...`` is found where a folder ``<name>`` lies), up to the URDF's own."""
+    if not file.startswith("robot:"):
+        return []
+    digest = file[len("robot:"):].partition("/")[0]
+    root = path.resolve()
+    while root.parent.name != "robots" or root.name != digest:
+        if root.parent == root:
+            return []
+        root = root.parent
+    dirs = [root] + [d for d in sorted(root.iterdir()) if d.is_dir() and not d.is_symlink()]
+    dirs += [e for d in dirs[1:] for e in sorted(d.iterdir()) if e.is_dir() and not e.is_symlink()]
+    return [str(d) for d in dirs[:64]]
 
 
 @functools.lru_cache(maxsize=32)
@@ -116,6 +153,29 @@ def _load_model(path: str, mtime_ns: int) -> Any:
     cached model is never modified)."""
     del mtime_ns  # part of the cache key only
     return pin.buildModelFromUrdf(path)
+
+
+@functools.lru_cache(maxsize=32)
+def _load_collision(path: str, mtime_ns: int, package_dirs: tuple[str, ...]) -> Any:
+    """The collision GeometryModel of a URDF file for its full model (cached; never modified)."""
+    del mtime_ns
+    return pin.buildGeomFromUrdf(_load_model(path, Path(path).stat().st_mtime_ns), path,
+                                 pin.GeometryType.COLLISION, package_dirs=list(package_dirs))
+
+
+def load_collision_model(path: Path, package_dirs: list[str]) -> Any:
+    """The URDF's collision geometry (pinocchio ``GeometryModel`` of coal objects); meshes are
+    looked up in ``package_dirs`` and in example-robot-data's ``share`` folder. A mesh that
+    cannot be found or read is a SceneError at ``("urdf", "file")``."""
+    dirs = [str(Path(d).expanduser()) for d in package_dirs]
+    erd = example_robot_data_dir()
+    if erd is not None:
+        dirs += [str(erd.parent.parent), str(erd)]
+    try:
+        return _load_collision(str(path), path.stat().st_mtime_ns, tuple(dirs))
+    except (RuntimeError, ValueError) as e:
+        why = " ".join(str(e).replace(str(path.parent), "").split())
+        raise SceneError(("urdf", "file"), f"cannot load the collision geometry of '{path.name}': {why}") from None
 
 
 def load_urdf_model(path: Path) -> Any:
@@ -164,6 +224,8 @@ class UrdfFinger:
         base_p: Array | None = None,  # (3,)
         link_radius: float = 0.0,
         tip_offset: Array | None = None,  # (3,) in the tip link's frame
+        link_geometry: str = "capsule",
+        package_dirs: list[str] | None = None,
     ):
         full = load_urdf_model(path)
         root_f = _body_frame(full, root_link)
@@ -259,6 +321,34 @@ class UrdfFinger:
         self.tip_offset = np.asarray(tip_offset, dtype=float)  # (3,)
 
         self.q0 = self._check_q(q0, ("q",))  # (n,)
+        self.link_geometry = link_geometry
+        self._shapes: list[list[tuple[Any, Array, Array]]] | None = None
+        if link_geometry == "urdf":
+            self._shapes = self._link_shapes(full, load_collision_model(path, package_dirs or []), q_neutral)
+
+    def _link_shapes(self, full: Any, geom: Any, q_neutral: Array) -> list[list[tuple[Any, Array, Array]]]:
+        """Per chain link, its collision objects: ``(coal geometry, R (3, 3), p (3,))`` in the link's
+        frame (a geometry's placement is given relative to its parent joint)."""
+        data = full.createData()
+        pin.framesForwardKinematics(full, data, q_neutral)
+        by_link: dict[str, list[tuple[Any, Array, Array]]] = {lk: [] for lk in self.links}
+        for o in geom.geometryObjects:
+            link = str(full.frames[int(o.parentFrame)].name)
+            if link not in by_link:
+                continue
+            rel = data.oMf[int(o.parentFrame)].actInv(data.oMi[int(o.parentJoint)] * o.placement)
+            scale = np.asarray(o.meshScale, dtype=float)
+            if not np.allclose(scale, 1.0):
+                raise SceneError(("urdf", "file"), f"link '{link}': scaled collision meshes are not supported "
+                                 f"(scale {scale.tolist()})")
+            by_link[link].append((o.geometry, np.asarray(rel.rotation, dtype=float).copy(),
+                                  np.asarray(rel.translation, dtype=float).copy()))
+        return [by_link[lk] for lk in self.links]
+
+    def collision_shapes(self, k: int) -> list[tuple[Any, Array, Array]] | None:
+        """The URDF collision objects of link ``k`` in its frame (``(coal geometry, R, p)``), or
+        ``None`` when the finger's links are capsules (``link_geometry`` ``"capsule"``)."""
+        return None if self._shapes is None else list(self._shapes[k])
 
     @classmethod
     def from_spec(cls, finger: FingerURDF) -> UrdfFinger:
@@ -273,6 +363,8 @@ class UrdfFinger:
             base_R=quat_wxyz_to_matrix(finger.base.quat_wxyz),
             base_p=np.asarray(finger.base.position, dtype=float),
             link_radius=finger.link_radius,
+            link_geometry=finger.link_geometry,
+            package_dirs=list(finger.urdf.package_dirs) + _upload_package_dirs(finger.urdf.file, path),
         )
 
     @staticmethod
@@ -377,4 +469,5 @@ class UrdfFinger:
         return a, b
 
 
-__all__ = ["ERD_PREFIX", "UrdfFinger", "example_robot_data_dir", "load_urdf_model", "resolve_urdf_path"]
+__all__ = ["ERD_PREFIX", "UrdfFinger", "example_robot_data_dir", "load_collision_model", "load_urdf_model",
+           "resolve_urdf_path"]

@@ -309,10 +309,10 @@ def test_bad_input_names_the_field() -> None:
     with pytest.raises(SceneError) as e:
         scene_from_dict(bad)
     assert e.value.loc == ("unknown",)
-    mesh = _scene3({"type": "mesh", "file": "x.stl"}, [_rod("f", [0, 0, 0], [0, 0, 1], 0.1)])
+    mesh = _scene3({"type": "mesh", "file": "no-such-file.stl"}, [_rod("f", [0, 0, 0], [0, 0, 1], 0.1)])
     with pytest.raises(SceneError) as e:
         scene_from_dict(mesh)
-    assert e.value.loc == ("object", "shape", "type")
+    assert e.value.loc == ("object", "shape", "file") and "not found" in str(e.value)
     sc = UnplacedScene.model_validate(data)
     for kw, loc in (({"tolerance": 0.0}, ("tolerance",)), ({"mu": -0.1}, ("mu",))):
         with pytest.raises(SceneError) as e:

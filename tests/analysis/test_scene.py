@@ -256,7 +256,8 @@ def test_scene_json_schema_is_a_valid_schema_mentioning_the_fields() -> None:
         "friction_cone_sides",
     ):
         assert field in props, field
-    assert {"dim", "object", "external_wrench", "contacts"} <= set(schema["required"])
+    assert {"dim", "object", "external_wrench"} <= set(schema["required"])
+    assert "contacts" not in schema["required"]  # omitted: found from the geometry
     assert set(defs["Contact"]["properties"]) == {"body", "point", "normal", "mu"}
     assert defs["Contact"]["properties"]["mu"]["minimum"] == 0
     assert set(defs["Finger2D"]["properties"]) >= {"name", "base", "links", "q"}
@@ -266,6 +267,20 @@ def test_scene_json_schema_is_a_valid_schema_mentioning_the_fields() -> None:
     text = json.dumps(schema)
     for shape in ("disk", "sphere", "box", "polygon", "cylinder", "mesh", "segment"):
         assert f'"{shape}"' in text
+    assert defs["FingerURDF"]["properties"]["link_geometry"]["enum"] == ["capsule", "urdf"]
+
+
+def test_scene_json_schema_accepts_contacts_auto_and_refuses_other_strings() -> None:
+    jsonschema = pytest.importorskip("jsonschema")
+    validator = jsonschema.Draft202012Validator(scene_json_schema())
+    data = json.loads((EXAMPLES / "planar_disk_envelope.json").read_text())
+    assert not list(validator.iter_errors(data))
+    options: list[str | list[Any]] = ["auto", []]
+    for contacts in options:
+        assert not list(validator.iter_errors({**data, "contacts": contacts}))
+    assert not list(validator.iter_errors({k: v for k, v in data.items() if k != "contacts"}))
+    errors = list(validator.iter_errors({**data, "contacts": "manual"}))
+    assert errors and errors[0].path[0] == "contacts"
 
 
 # --------------------------------------------------------------------------------------------

@@ -28,7 +28,7 @@ ENGINE_ROOMS: dict[str, tuple[str, ...]] = {
     "mujoco": ("sim",),
     "ompl": ("planner.transfer", "planner.object_motion"),
     "pinocchio": ("analysis.urdf",),
-    "coal": ("analysis.detect",),
+    "coal": ("analysis.detect", "analysis.mesh"),
     "ray": ("api.workers", "ctp.batch"),
     "fastapi": ("api",),
     "typer": ("ctp",),
