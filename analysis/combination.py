@@ -88,11 +88,13 @@ def no_grasp_reason(violation: float | None) -> str:
 
 
 def summarize(parts: CombinationParts, stationary_known: bool | None = None,
-              violation: float | None = None) -> CombinationSummary:
+              violation: float | None = None, oracle: DAFCOracle | None = None) -> CombinationSummary:
     """Feasibility (stationary grasp exists and DAFC is non-empty), DAFC dimension, an example.
 
     ``violation``: the least friction violation of (18) when it is infeasible, if known (else one
-    LP, :func:`analysis.stationary.stationary_violation`), which marks degenerate verdicts."""
+    LP, :func:`analysis.stationary.stationary_violation`), which marks degenerate verdicts.
+    ``oracle``: the DAFC oracle of ``parts`` to use (a fresh one by default); the caller may read
+    its ``lp_count`` afterwards."""
     sy, sel, ms, st, fs = parts.system, parts.sel, parts.ms, parts.st, parts.fs
     c = sel.combination
     p = st.p
@@ -104,7 +106,7 @@ def summarize(parts: CombinationParts, stationary_known: bool | None = None,
         if violation is None:
             violation = stationary_violation(sy, st, fs)
         return CombinationSummary(c, False, no_grasp_reason(violation), ms.a, ms.a_bar, 0, p, True, None)
-    oracle = parts.oracle()
+    oracle = parts.oracle() if oracle is None else oracle
     best, dim, exact = dafc_nonempty(oracle)
     if best is None:
         reason = "DAFC is empty"
@@ -137,6 +139,9 @@ class CombinationReport:
         out: dict[str, Any] = self.summary.to_json()
         out["notes"] = list(self.notes)
         out["scales"] = {"force": self.parts.system.scales.force, "length": self.parts.system.scales.length}
+        tau_max = self.parts.system.tau_max  # joint torque limits [N m]; null: unlimited
+        out["joint_torque_limits"] = None if tau_max is None else [
+            float(x) if np.isfinite(x) else None for x in tau_max]
         out["semantics"] = SEMANTICS
         out["motion_space"] = {
             "a": ms.a,
@@ -281,14 +286,20 @@ def analyze_combination(
         pair = stationary_grasps(sy, sel, st, fs)
         grasp: StationaryGrasp | None = pair[0]
         grasp_min: StationaryGrasp | None = pair[1]
-    except NoStationaryGrasp:
+    except NoStationaryGrasp as e:
         grasp = grasp_min = None
+        if sy.tau_max is not None and "torque limits" in str(e):
+            stationary_note: str | None = str(e).split(": ", 1)[-1]
+        else:
+            stationary_note = None
+    else:
+        stationary_note = None
     summary = summarize(parts, stationary_known=grasp is not None)
     oracle = parts.oracle()
     if samples is None:  # the circle/sphere densely, higher-dimensional motion spaces coarsely
         samples = default_samples(ms.a_bar)
     dset = dafc_set(oracle, samples=samples) if ms.a_bar else None
-    notes: list[str] = []
+    notes: list[str] = [stationary_note] if stationary_note else []
     if dset is not None and dset.description_error:
         notes.append(dset.description_error)
     if grasp is None and ms.a_bar and "degenerate" in summary.reason:

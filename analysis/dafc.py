@@ -34,7 +34,7 @@ from analysis.linalg import rank
 from analysis.motion import MotionSpace
 from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, snap
 from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators
-from analysis.solvers.highs import LPModel, solve_lp
+from analysis.solvers.highs import LPModel
 from analysis.statics import Statics
 from analysis.torque_conditions import torque_conditions
 
@@ -54,7 +54,8 @@ SEMANTICS: dict[str, str] = {
     "slip (no pyramid); in the stationary state (18) it carries a normal force only",
     "d_point": "a D-point carries no force and must not penetrate (A_d [dq; dr] <= 0, equality allowed)",
     "n_point": "N is the state of a contact with mu = 0 (normal force only)",
-    "torque_limits": "joint-torque limits apply to torque sets, not to DAFC",
+    "torque_limits": "joint-torque limits (the scene's joint_torque_limits, else the URDF's efforts) bound the "
+    "stationary grasp (18) and the torque sets (32), not DAFC",
     "friction_cone_3d": "F-point cones in 3-D are inscribed k-sided pyramids (k = friction_cone_sides)",
 }
 
@@ -94,6 +95,7 @@ class DAFCOracle:
         self._lp: LPModel | None = None
         self._redundancy: LPModel | None = None
         self._relaxed: LPModel | None = None
+        self._aligned: LPModel | None = None  # the friction-aligned redundancy LP (_aligned_allowable)
         self._G_relaxed = np.zeros((system.D, 0))
         self._d = d
         self.lp_count = 0
@@ -372,14 +374,21 @@ class DAFCOracle:
         goal = scale * target / tn - base  # (d #S,)
         a_bar = self.ms.a_bar
         B_u, B_r = self.B[:, :a_bar], self.B[:, a_bar:]
-        I = np.eye(k)
-        A_ub = np.vstack([np.hstack([Pr, -I]), np.hstack([-Pr, -I]), np.hstack([B_r, np.zeros((B_r.shape[0], k))])])
         tol = ALLOW_TOL * max(1.0, float(np.linalg.norm(u)))
         b_ub = np.concatenate([goal, -goal, -(B_u @ u) + tol])
-        lb = np.r_[np.full(nr, -np.inf), np.zeros(k)]
+        if self._aligned is None:
+            # the rows depend on the combination only: one model per oracle, only b_ub changes
+            I = np.eye(k)
+            A_ub = np.vstack([np.hstack([Pr, -I]), np.hstack([-Pr, -I]),
+                              np.hstack([B_r, np.zeros((B_r.shape[0], k))])])  # (2 k + #D, r + k)
+            self._aligned = LPModel(nr + k, A_ub=A_ub, b_ub=b_ub, lb=np.r_[np.full(nr, -np.inf), np.zeros(k)])
+        else:
+            self._aligned.set_ub_rhs(b_ub)
         try:
-            res = solve_lp(np.r_[np.zeros(nr), np.ones(k)], A_ub=A_ub, b_ub=b_ub, lb=lb)
+            # solved cold: the redundancy chosen for a direction does not depend on earlier ones
+            res = self._aligned.solve_cold(np.r_[np.zeros(nr), np.ones(k)])
         except SolverError:
+            self._aligned = None  # leave no half-solved model for the next direction
             return None  # one candidate fewer; the others are still tried
         self.lp_count += 1
         return None if res.x is None else res.x[:nr]

@@ -69,7 +69,7 @@ class EnumerationStats:
     pruned_stationary: int = 0
     pruned_modes: int = 0
     stationary_lps: int = 0
-    dafc_lps: int = 0
+    dafc_lps: int = 0  # LPs of the DAFC oracles (membership, redundancy, relaxation, realisability)
     stopped_at_limit: bool = False  # the enumeration stopped after ``limit`` feasible combinations
 
 
@@ -281,7 +281,9 @@ def _enumerate_serial(
             known = found is not None
         else:
             stats.pruned_stationary += 1
-        summary = summarize(parts, stationary_known=known, violation=violation)
+        oracle = parts.oracle()
+        summary = summarize(parts, stationary_known=known, violation=violation, oracle=oracle)
+        stats.dafc_lps += oracle.lp_count
         results[c] = summary
         feasible += summary.feasible
         if limit is not None and feasible >= limit:

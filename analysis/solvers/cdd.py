@@ -182,15 +182,30 @@ def _reduce_by_lp(g: Generators) -> Generators:
     return Generators(V[keep_v].reshape(-1, n), R.reshape(-1, n), Ln)
 
 
+def _pointed(R: Array) -> bool:
+    """Is ``cone(R)`` pointed (rays ``R`` ``(k, n)``, unit rows)? ``max sum lam`` s.t.
+    ``R^T lam = 0``, ``0 <= lam <= 1`` is zero exactly then (tolerance ``1e-9``)."""
+    if len(R) < 2:
+        return True
+    res = LPModel(len(R), A_eq=R.T, b_eq=np.zeros(R.shape[1]), lb=0.0, ub=1.0).solve(np.ones(len(R)), maximize=True)
+    return bool(res.found and res.objective is not None and res.objective <= 1e-9)
+
+
 def reduce_generators(g: Generators) -> Generators:
     """Remove redundant vertices/rays (cdd canonical V-representation).
 
     Duplicates (common after a linear map with a null space) are dropped first, since cdd's
-    redundancy removal costs one LP per row.
+    redundancy removal costs one LP per row. A pointed set (no lines, and no nonnegative
+    combination of the rays vanishes: :func:`_pointed`) is reduced by HiGHS LPs
+    (:func:`_reduce_by_lp`; the irredundant vertices and rays of a pointed polyhedron are unique,
+    so the answer is cdd's); cdd's canonical form also finds implicit lines (opposite rays), so it
+    is kept for the others. pycddlib 3.0.0's ``matrix_canonicalize`` aborts the whole process
+    (``munmap_chunk(): invalid pointer``, not an exception) on some nearly parallel rays, e.g. the
+    torque set of SSDDSSSDFDDF in ``sphere_wrap_three_link`` (one vertex, 19 rays in 16-D).
     """
     n = g.vertices.shape[1] if g.vertices.size else (g.rays.shape[1] if g.rays.size else g.lines.shape[1])
     g = Generators(_unique_rows(g.vertices), _unique_rows(g.rays), _unique_rows(g.lines))
-    if len(g.vertices) + len(g.rays) > LP_REDUCTION_ABOVE:
+    if len(g.vertices) + len(g.rays) > LP_REDUCTION_ABOVE or (not len(g.lines) and _pointed(g.rays)):
         return _reduce_by_lp(g)  # already irredundant: cdd's check would cost one LP per row again
     rows = (
         [[1.0, *v] for v in g.vertices] + [[0.0, *r] for r in g.rays] + [[0.0, *ln] for ln in g.lines]

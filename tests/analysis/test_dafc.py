@@ -438,3 +438,33 @@ def test_exact_description_agrees_with_the_oracle(name):
             assert exact.contains(dr) == oracle.test(dr).member, (c, dr)
             checked += 1
     assert checked >= 30
+
+
+def test_redundancy_search_does_not_depend_on_earlier_directions() -> None:
+    """The friction-aligned redundancy LP is one model per oracle whose right-hand side changes
+    per direction (solved cold): testing seeded directions of wrap combinations whose slips
+    depend on the redundancy in one order and in the reverse order, each with a fresh oracle,
+    gives the same answers (membership, work to 1e-9 relative, motion to 1e-9)."""
+    rng = np.random.default_rng(11)
+    checked = 0
+    for c in ("FSDFSDDDF", "SSFDSDFSD", "FSSFDDSSF", "SDSDSFSFS"):
+        p = parts_of("sphere_four_finger_wrap", c)
+        if p.ms.a_bar == 0 or not p.oracle().slip_depends_on_redundancy:
+            continue
+        U = rng.standard_normal((6, p.ms.a_bar))
+        dirs = [p.ms.Lambda_r_t @ (u / np.linalg.norm(u)) for u in U]
+        forward = [p.oracle().test(d, screen=False, quick=False, witness=False) for d in dirs]
+        o = p.oracle()
+        backward = [o.test(d, screen=False, quick=False, witness=False) for d in dirs[::-1]][::-1]
+        o2 = p.oracle()
+        again = [o2.test(d, screen=False, quick=False, witness=False) for d in dirs]
+        for a, b, e in zip(forward, backward, again, strict=True):
+            for x in (b, e):
+                assert a.member == x.member and a.reason == x.reason
+                if np.isfinite(a.work):
+                    assert abs(a.work - x.work) <= 1e-9 * max(1.0, abs(a.work))
+                if a.zeta_c is not None:
+                    assert x.zeta_c is not None
+                    np.testing.assert_allclose(a.zeta_c, x.zeta_c, rtol=0, atol=1e-9)
+        checked += 1
+    assert checked >= 2

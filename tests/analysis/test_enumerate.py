@@ -32,6 +32,7 @@ def test_pruning_is_exact(name: str) -> None:
     assert [s.combination for s in pruned] == canonical == all_combinations(system)
     assert len(pruned) == 3**system.L == stats.combinations
     assert stats.pruned_stationary > 0  # the pruning was exercised
+    assert stats.dafc_lps > 0 and stats.stationary_lps > 0  # both kinds of LP are counted
     for s in pruned:
         _same(s, summarize(CombinationParts.build(system, s.combination)))
 

@@ -3,10 +3,16 @@ and residuals (KKT on random feasible LPs)."""
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
+from scipy.optimize import linprog
 
-from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators, reduce_generators
+from analysis.solvers.cdd import Generators, _pointed, cone_generators, polyhedron_generators, reduce_generators
 from analysis.solvers.highs import INF, LPModel, RowBoundLP, solve_lp
 
 
@@ -60,6 +66,48 @@ def test_reduce_generators_keeps_only_extreme_points(extra):
     h = reduce_generators(Generators(V, np.zeros((0, 3)), np.zeros((0, 3))))
     assert sorted(map(tuple, np.round(h.vertices, 9))) == sorted(map(tuple, cube))
 
+
+
+def test_reduce_generators_survives_the_rays_that_abort_cdd() -> None:
+    """One vertex and 19 nearly parallel rays in 16-D (the torque set of SSDDSSSDFDDF in the
+    12-contact wrap) made pycddlib's matrix_canonicalize abort the process; run in a child process
+    so that a regression fails this test instead of killing the run. Every ray is extreme: no
+    nonnegative combination of the other 18 gives it (scipy's LP, independent of HiGHS' model)."""
+    path = Path(__file__).with_name("cdd_abort_generators.json")
+    code = ("import json, sys, numpy as np; from analysis.solvers.cdd import Generators, reduce_generators; "
+            f"d = json.load(open({str(path)!r})); "
+            "g = reduce_generators(Generators(np.array(d['vertices']), np.array(d['rays']), np.zeros((0, 16)))); "
+            "print(json.dumps({'v': g.vertices.tolist(), 'r': g.rays.tolist()}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         cwd=Path(__file__).parents[2])
+    assert out.returncode == 0, out.stderr[-500:]
+    got = json.loads(out.stdout)
+    data = json.loads(path.read_text())
+    R = np.array(data["rays"])
+    R /= np.linalg.norm(R, axis=1, keepdims=True)
+    np.testing.assert_allclose(got["v"], data["vertices"], rtol=0, atol=1e-9)
+    assert len(got["r"]) == len(R) == 19
+    for i in range(len(R)):
+        others = np.delete(R, i, axis=0)
+        res = linprog(np.zeros(len(others)), A_eq=others.T, b_eq=R[i], bounds=[(0, None)] * len(others),
+                      method="highs")
+        assert res.status == 2  # infeasible: ray i is extreme
+    # each returned ray is one of the input rays (unit length)
+    for r in got["r"]:
+        assert np.min(np.linalg.norm(R - np.array(r), axis=1)) < 1e-9
+
+
+def test_reduce_generators_with_lines() -> None:
+    """A slab's worth of generators with a line (cdd's canonical form): the line z, the rays x and
+    y (the redundant ray (1, 1, 5) / |.| is the sum of x, y and the line), the vertex at the origin
+    (the vertex (1, 1, 0) = origin + x + y is redundant)."""
+    V = np.array([[0.0, 0.0, 0.0], [1.0, 1.0, 0.0]])
+    R = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 5.0]])
+    R /= np.linalg.norm(R, axis=1, keepdims=True)
+    g = reduce_generators(Generators(V, R, np.array([[0.0, 0.0, 1.0]])))
+    assert g.vertices.shape[0] == 1 and abs(g.vertices[0, :2]).max() < 1e-9
+    assert np.allclose(np.abs(g.lines), [[0.0, 0.0, 1.0]])
+    assert sorted(map(tuple, np.round(np.abs(g.rays[:, :2]), 9))) == [(0.0, 1.0), (1.0, 0.0)]
 
 # -- LPResult: duals and residuals ---------------------------------------------------------------
 
@@ -163,3 +211,18 @@ def test_row_bound_lp_finds_points_and_reports_empty_polytopes():
     assert lp.solve(np.array([0.5, 0.6, -INF]), np.array([INF, INF, 1.0])) is None  # x + y >= 1.1 > 1
     assert lp.solve(np.array([2.0, -INF, -INF]), np.array([INF, INF, INF])) is None  # outside the box
     assert lp.count == 3
+
+
+def test_pointed_cone_test() -> None:
+    """``cone(R)`` is pointed unless a nonnegative combination of its rays vanishes: the axes of
+    the orthant and seeded rays inside it are pointed; x, -x (an implicit line) or three rays
+    summing to zero are not, and those keep cdd's canonical form (which finds the line)."""
+    rng = np.random.default_rng(7)
+    inside = rng.random((20, 4)) + 1e-3
+    assert _pointed(np.vstack([np.eye(4), inside / np.linalg.norm(inside, axis=1, keepdims=True)]))
+    assert not _pointed(np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0]]))
+    tri = np.array([[1.0, 0.0], [-0.5, 3**0.5 / 2], [-0.5, -(3**0.5) / 2]])
+    assert not _pointed(tri)
+    g = reduce_generators(Generators(np.zeros((1, 2)), np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0]]),
+                                     np.zeros((0, 2))))
+    assert np.allclose(np.abs(g.lines), [[1.0, 0.0]]) and np.allclose(g.rays, [[0.0, 1.0]])
