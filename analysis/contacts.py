@@ -23,6 +23,7 @@ from analysis.geometry import object_origin, object_size
 from analysis.kinematics import BodyRef, HandKinematics
 from analysis.scales import Scales, grasp_scales
 from analysis.scene import Scene
+from analysis.torque_limits import hand_torque_limits
 
 STATES = "FNSD"
 
@@ -74,6 +75,8 @@ class GraspSystem:
     friction_sides: int = 16
     contact_names: tuple[str, ...] = field(default=())
     object_size: float = 0.0  # the object's characteristic size [m]; 0: unknown (lever arms used)
+    tau_max: Array | None = None  # (M,) joint torque limits [N m] (inf: unlimited); None: no limit
+    joint_labels: tuple[str, ...] = field(default=())  # (M,) names of the joints, for messages
 
     def __post_init__(self) -> None:
         L, d = self.points.shape
@@ -81,6 +84,7 @@ class GraspSystem:
         assert self.J_blocks.shape[:2] == (L, d)
         assert self.G_blocks.shape == (L, self.D, d)
         assert np.allclose(np.linalg.norm(self.normals, axis=1), 1.0, atol=1e-6)
+        assert self.tau_max is None or (self.tau_max.shape == (self.M,) and np.all(self.tau_max > 0))
 
     @property
     def L(self) -> int:
@@ -151,6 +155,8 @@ def system_from_arrays(
     friction_sides: int = 16,
     contact_names: tuple[str, ...] = (),
     object_size: float = 0.0,
+    tau_max: Array | None = None,
+    joint_labels: tuple[str, ...] = (),
 ) -> GraspSystem:
     """A :class:`GraspSystem` from contact points ``(L, d)``, normals ``(L, d)`` (normalised here)
     and point Jacobians ``(L, d, M)`` (default: contacts on fixed bodies, ``M = 0``); builds the
@@ -177,6 +183,8 @@ def system_from_arrays(
         friction_sides=friction_sides,
         contact_names=contact_names,
         object_size=float(object_size),
+        tau_max=None if tau_max is None else np.asarray(tau_max, dtype=float),
+        joint_labels=joint_labels,
     )
 
 
@@ -207,6 +215,8 @@ def build_system(scene: Scene, hand: HandKinematics | None = None, q: Array | No
         friction_sides=scene.friction_cone_sides,
         contact_names=tuple(c.body for c in scene.contacts),
         object_size=object_size(scene),
+        tau_max=hand_torque_limits(scene, hand),
+        joint_labels=tuple(hand.joint_labels()),
     )
 
 

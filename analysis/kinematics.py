@@ -210,6 +210,15 @@ class HandKinematics:
                 raise SceneError(("fingers", i, *e.loc), e.reason) from None
         return cls(scene.dim, fingers, [b.name for b in scene.fixed_bodies])
 
+    def joint_labels(self) -> list[str]:
+        """``(M,)`` names of the joints in ``q`` order: ``finger/<URDF joint name>`` for URDF
+        fingers, ``finger/j<k>`` (``k`` from 0) for chains."""
+        out: list[str] = []
+        for f in self.fingers:
+            names = getattr(f, "joint_names", None) or [f"j{k}" for k in range(f.n_joints)]
+            out.extend(f"{f.name}/{n}" for n in names)
+        return out
+
     # -- bodies -------------------------------------------------------------------------------
 
     def body_names(self) -> list[str]:

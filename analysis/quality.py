@@ -29,11 +29,14 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from analysis._types import Array
-from analysis.dpfc import DPFC
-from analysis.friction import FrictionSet
+from analysis.contacts import GraspSystem, selection
+from analysis.dpfc import DPFC, dpfc
+from analysis.exceptions import NoStationaryGrasp
+from analysis.friction import FrictionSet, friction_set
 from analysis.scales import Scales
 from analysis.solvers.cdd import generators_to_inequalities
-from analysis.statics import Statics
+from analysis.statics import Statics, statics
+from analysis.stationary import stationary_grasp
 
 #: Relative rank tolerance (singular values / largest) below which a point set has empty interior.
 RANK_TOL = 1e-9
@@ -115,3 +118,32 @@ def epsilon(st: Statics, fs: FrictionSet, sc: Scales) -> BallRadius:
     if dist[k] <= 0.0:
         return BallRadius(0.0, hull.equations[k, :-1], "the origin is not interior to the hull")
     return BallRadius(float(dist[k]), hull.equations[k, :-1], "qhull facets of the primitive wrenches")
+
+
+@dataclass(frozen=True)
+class GraspQuality:
+    """Both radii of one combination [N in the ``l`` metric]: the DPFC wrench ball around the
+    interior stationary grasp and the Ferrari-Canny epsilon of its friction set."""
+
+    combination: str
+    wrench_ball: BallRadius
+    epsilon: BallRadius
+    length: float  # l [m], the metric's length
+
+    def to_json(self) -> dict[str, object]:
+        r = self.wrench_ball.radius
+        return {"wrench_ball": None if r is None or not np.isfinite(r) else r,
+                "wrench_ball_reason": self.wrench_ball.reason, "epsilon": self.epsilon.radius,
+                "epsilon_reason": self.epsilon.reason, "metric_length": self.length}
+
+
+def combination_quality(system: GraspSystem, combination: str) -> GraspQuality | None:
+    """:class:`GraspQuality` of a combination with a stationary grasp (18); ``None`` without one."""
+    sel = selection(system, combination)
+    st, fs = statics(system, sel), friction_set(system, sel)
+    try:
+        grasp = stationary_grasp(system, sel, st, fs)
+    except NoStationaryGrasp:
+        return None
+    sc = system.scales
+    return GraspQuality(sel.combination, wrench_ball(dpfc(st, fs, grasp), sc), epsilon(st, fs, sc), sc.length)

@@ -17,6 +17,11 @@ Both are posed in the scales of :mod:`analysis.scales` (unknowns ``f_c / F0``, e
 in units of ``F0`` and ``F0 l``), bounded by a total normal force of ``GRIP_BOUND F0``, and
 re-checked in newtons before they are returned: a verdict "the contacts hold the object" always
 comes with forces that satisfy (18) to ``FORCE_TOL F0``.
+
+Joint torque limits (:mod:`analysis.torque_limits`, the scene's ``joint_torque_limits`` or the
+URDF's efforts) bound ``tau_st = J_c^T f_c``: ``|tau_st_j| <= tau_max_j`` is a row of every LP
+here. When only the limits stand in the way, :class:`NoStationaryGrasp` names the joints and the
+torques they would need.
 """
 
 from __future__ import annotations
@@ -33,6 +38,7 @@ from analysis.friction import FrictionSet
 from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, snap
 from analysis.solvers.highs import LPModel, solve_lp
 from analysis.statics import Statics
+from analysis.torque_limits import LIMIT_TOL, JointExcess, least_excess, limit_rows, over_limit
 
 Kind = Literal["interior", "min_grip"]
 
@@ -81,7 +87,14 @@ def certifies(system: GraspSystem, st: Statics, fs: FrictionSet, f_c: Array, tol
     """Do the forces ``f_c`` solve (18) within ``tol * F0`` and the grip bound?"""
     eq, fr = stationary_residuals(system, st, fs, f_c)
     total = float((_normal_rows(fs) @ f_c).sum()) if f_c.size else 0.0
-    return bool(eq <= tol and fr <= tol and total <= system.scales.grip_bound * (1 + tol))
+    within = over_limit(st.J_c.T @ f_c, system.tau_max, LIMIT_TOL).size == 0 if f_c.size else True
+    return bool(eq <= tol and fr <= tol and total <= system.scales.grip_bound * (1 + tol) and within)
+
+
+def _limits(system: GraspSystem, st: Statics) -> tuple[Array, Array]:
+    """The joint torque limits as rows in the scaled unknowns ``g = f_c / F0``: ``(A (2 n_lim, L_c), b)``."""
+    A, b = limit_rows(st.J_c.T, system.tau_max, system.scales.force)
+    return snap(A), b
 
 
 def _equilibrium(system: GraspSystem, st: Statics) -> tuple[Array, Array]:
@@ -104,8 +117,9 @@ def min_total_normal(system: GraspSystem, st: Statics, fs: FrictionSet) -> tuple
         return (0.0, np.zeros(0)) if sc.wrench_error(system.w_ex) <= FORCE_TOL else None
     n_sum = _normal_rows(fs).sum(axis=0)  # (L_c,)
     A_eq, b_eq = _equilibrium(system, st)
-    A_ub = np.vstack([fs.C, n_sum[None, :]])
-    b_ub = np.r_[np.zeros(fs.C.shape[0]), GRIP_BOUND]
+    A_lim, b_lim = _limits(system, st)
+    A_ub = np.vstack([fs.C, n_sum[None, :], A_lim])
+    b_ub = np.r_[np.zeros(fs.C.shape[0]), GRIP_BOUND, b_lim]
     failure = "no method decided the LP"
     for method in ("warm", "defaults", "ipm"):
         model = LPModel(L_c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, feasibility=LP_FEAS_TOL)
@@ -135,10 +149,10 @@ DEGENERATE_TOL = 1e-6
 
 
 def stationary_violation(system: GraspSystem, st: Statics, fs: FrictionSet) -> float | None:
-    """``t* = min t`` s.t. ``C f_c <= t F0``, ``|G_c f_c + w_ex| <= t`` (units of F0 and F0 l) and
-    the grip bound: how far (units of F0) the friction rows and the equilibrium must give for the
-    contacts to hold the object (``<= 0`` when they do, strictly inside every loaded cone);
-    ``None`` when no contact carries force."""
+    """``t* = min t`` s.t. ``C f_c <= t F0``, ``|G_c f_c + w_ex| <= t`` (units of F0 and F0 l),
+    ``|tau_j| <= (1 + t) tau_max_j`` and the grip bound: how far (units of F0) the friction rows and
+    the equilibrium must give for the contacts to hold the object (``<= 0`` when they do, strictly
+    inside every loaded cone); ``None`` when no contact carries force."""
     L_c = st.G_c.shape[1]
     if L_c == 0:
         return None
@@ -146,9 +160,11 @@ def stationary_violation(system: GraspSystem, st: Statics, fs: FrictionSet) -> f
     m, D = fs.C.shape[0], A_eq0.shape[0]
     n_sum = _normal_rows(fs).sum(axis=0)
     one_m, one_D = np.ones((m, 1)), np.ones((D, 1))
+    A_lim, b_lim = _limits(system, st)
+    one_l = np.ones((A_lim.shape[0], 1))
     A_ub = np.vstack([np.hstack([fs.C, -one_m]), np.hstack([A_eq0, -one_D]), np.hstack([-A_eq0, -one_D]),
-                      np.r_[n_sum, 0.0][None, :]])
-    b_ub = np.r_[np.zeros(m), b_eq, -b_eq, GRIP_BOUND]
+                      np.r_[n_sum, 0.0][None, :], np.hstack([A_lim, -one_l])])
+    b_ub = np.r_[np.zeros(m), b_eq, -b_eq, GRIP_BOUND, b_lim]
     lb = np.r_[np.full(L_c, -np.inf), -1.0]  # t >= -1: bounded below when the grasp is interior
     res = solve_lp(np.r_[np.zeros(L_c), 1.0], A_ub=A_ub, b_ub=b_ub, lb=lb)
     if res.status != "optimal" or res.objective is None:
@@ -158,6 +174,13 @@ def stationary_violation(system: GraspSystem, st: Statics, fs: FrictionSet) -> f
 
 def _minimum(system: GraspSystem, sel: Selection, st: Statics, fs: FrictionSet) -> tuple[float, Array]:
     found = min_total_normal(system, st, fs)
+    if found is None and system.tau_max is not None and st.G_c.shape[1]:
+        excess = _limit_excess(system, st, fs)
+        if excess:
+            raise NoStationaryGrasp(
+                f"combination {sel.combination}: no stationary grasp (18) within the joint torque limits; "
+                f"holding the object needs {'; '.join(e.describe() for e in excess)}"
+            )
     if found is None:
         raise NoStationaryGrasp(
             f"combination {sel.combination}: no contact forces in the friction set balance the external "
@@ -165,6 +188,18 @@ def _minimum(system: GraspSystem, sel: Selection, st: Statics, fs: FrictionSet) 
             "(eq. 18 infeasible)"
         )
     return found
+
+
+def _limit_excess(system: GraspSystem, st: Statics, fs: FrictionSet) -> tuple[JointExcess, ...]:
+    """The joints over their limits in the stationary grasp that needs the least relaxation of them
+    (``()`` if the limits are not what makes (18) infeasible)."""
+    assert system.tau_max is not None
+    n_sum = _normal_rows(fs).sum(axis=0)
+    A = np.vstack([fs.C, n_sum[None, :]])
+    b = np.r_[np.zeros(fs.C.shape[0]), GRIP_BOUND]
+    found = least_excess((A, b), _equilibrium(system, st), snap(st.J_c.T), system.tau_max, system.scales.force,
+                         system.joint_labels)
+    return () if found is None else found
 
 
 def _interior(system: GraspSystem, st: Statics, fs: FrictionSet, n_star: float, f_min: Array) -> StationaryGrasp:
@@ -185,6 +220,9 @@ def _interior(system: GraspSystem, st: Statics, fs: FrictionSet, n_star: float, 
         ]
     )
     b_ub = np.concatenate([np.zeros(m + Nr.shape[0]), [budget]])
+    A_lim, b_lim = _limits(system, st)
+    A_ub = np.vstack([A_ub, np.hstack([A_lim, np.zeros((A_lim.shape[0], 1))])])
+    b_ub = np.concatenate([b_ub, b_lim])
     A_eq0, b_eq = _equilibrium(system, st)
     A_eq = np.hstack([A_eq0, np.zeros((A_eq0.shape[0], 1))])
     res = solve_lp(np.r_[np.zeros(L_c), 1.0], A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, maximize=True)

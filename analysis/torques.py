@@ -41,6 +41,10 @@ from analysis.torque_conditions import TorqueConditions, torque_conditions
 #: it (e.g. several 3-D F-points with 16-sided pyramids: up to k^#F vertices) T is reported by
 #: its H-representation in contact-force space and the linear map to joint torques.
 MAX_ENUMERATION_DIM = 7
+#: Above ``SMALL_DIM`` only with at most ``MAX_ENUMERATION_ROWS`` inequality rows (12 contacts,
+#: FDDFDDFDDFDD: 7 dimensions and 4 sixteen-sided pyramids took cdd 2 s), as for DPFC.
+SMALL_DIM = 4
+MAX_ENUMERATION_ROWS = 64
 #: ... and reported by vertices and rays only when the force polyhedron has at most this many
 #: (removing the redundant ones among thousands costs one LP each: half a minute at 12 contacts).
 MAX_GENERATORS = 400
@@ -191,7 +195,7 @@ def _for_motion(
     f_rec, work = _recommended(fs, tc, system.w_ex, work_target)
     dim_P = tc.L_c - (rank(A_eq) if A_eq.size else 0)
     gens: Generators | None = None
-    if dim_P <= MAX_ENUMERATION_DIM:
+    if dim_P <= MAX_ENUMERATION_DIM and (dim_P <= SMALL_DIM or A_ub.shape[0] <= MAX_ENUMERATION_ROWS):
         raw = polyhedron_generators(A_ub, b_ub, A_eq, b_eq)
         if raw.is_empty:
             raise EmptyTorqueSet("the torque set (32) is empty for this direction")
@@ -235,12 +239,13 @@ def _recommended(
     target = 0.5 * (1.0 + float(np.linalg.norm(w_ex))) if work_target is None else work_target
     best = tc.max_work()
     if best.status == "infeasible":
-        raise EmptyTorqueSet("the torque set (32) is empty for this direction")
+        raise _over_limits(tc, target, w_ex) or EmptyTorqueSet("the torque set (32) is empty for this direction")
     if best.status == "optimal":
         assert best.objective is not None
         max_work = best.objective + work0
         if max_work <= 1e-9 * (1 + float(np.linalg.norm(w_ex))):
-            raise EmptyTorqueSet("no member of (32) does positive work in this direction")
+            raise _over_limits(tc, target, w_ex) or EmptyTorqueSet(
+                "no member of (32) does positive work in this direction")
         target = min(target, 0.5 * max_work)
     A_w = np.vstack([A_ub, -work_row[None, :]])
     b_w = np.concatenate([b_ub, [work0 - target]])
@@ -264,6 +269,21 @@ def _recommended(
     second = solve_lp(np.r_[np.zeros(L_c), 1.0], A_ub=A2, b_ub=b2, A_eq=A2_eq, b_eq=b_eq, maximize=True)
     f = second.x[:L_c] if second.found and second.x is not None else first.x
     return f, float(work_row @ f + work0)
+
+
+def _over_limits(tc: TorqueConditions, target: float, w_ex: Array) -> EmptyTorqueSet | None:
+    """The error for a torque set (32) that only the joint torque limits make empty: it names the
+    joints and the torques the motion needs (least uniform relaxation of the limits, at the
+    target work, else at a work just above zero); ``None`` when the limits are not the cause."""
+    if tc.tau_max is None:
+        return None
+    for work in (target, 1e-6 * (1.0 + float(np.linalg.norm(w_ex)))):
+        excess = tc.limit_excess(work)
+        if excess:
+            return EmptyTorqueSet(
+                "the torque set (32) is empty within the joint torque limits for this direction; moving "
+                f"the object needs {'; '.join(e.describe() for e in excess)}")
+    return None
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,8 @@ from analysis.exceptions import CTPError, SceneError
 from analysis.geometry import object_size
 from analysis.loader import load_scene, read_scene_data, scene_from_dict, with_detected_contacts
 from analysis.modes import combination_admissible, enumerate_modes
+from analysis.placement import placed_scene_data
+from analysis.quality import combination_quality
 from analysis.scene import check_enumerable, scene_json_schema
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="Contact-state closure analysis and planning.")
@@ -90,6 +92,11 @@ def _parse_vector(text: str, field: str) -> np.ndarray:
     return np.array(values)
 
 
+def _radius(r: float | None) -> str:
+    """A quality radius [N] for the table: ``inf`` for an unbounded set, ``-`` when not computed."""
+    return "-" if r is None else "inf" if not np.isfinite(r) else f"{r:.3g}"
+
+
 def _fmt(v: np.ndarray | None, digits: int = 3) -> str:
     if v is None:
         return "-"
@@ -111,6 +118,8 @@ def analyze(
                                               "or 'F<=2, S==0'")] = None,
     limit: Annotated[int | None, typer.Option(help="stop after this many feasible combinations "
                                               "(strongest first)")] = None,
+    quality: Annotated[bool, typer.Option(help="grasp quality of each feasible combination: the DPFC wrench "
+                                          "ball and the Ferrari-Canny epsilon [N, moments per object size]")] = False,
 ) -> None:
     """Closure analysis: every combination (table), or the full report of one."""
 
@@ -164,20 +173,33 @@ def analyze(
         _fail(str(e), code=1)
     rows = [s for s in summaries if s.feasible] if feasible_only or len(summaries) > 729 else summaries
     decided = "combinations decided (strongest first)" if stopped else "combinations"
+    grades = {s.combination: combination_quality(system, s.combination) for s in summaries
+              if s.feasible} if quality else {}
     table = Table(title=f"{sc.name}: {sum(s.feasible for s in summaries)} of {len(summaries)} {decided} feasible")
-    for col in ("combination", "feasible", "dim DAFC", "dim DPFC", "example direction", "note"):
+    cols = ["combination", "feasible", "dim DAFC", "dim DPFC", "example direction", "note"]
+    if quality:
+        cols[4:4] = ["ball [N]", "eps [N]"]
+    for col in cols:
         table.add_column(col)
     for s in rows:
-        table.add_row(s.combination, "yes" if s.feasible else "no", str(s.dim_dafc), str(s.dim_dpfc),
-                      _fmt(s.example_direction, 2), ("" if s.exact else "sampled; ") + (
-                          "" if s.feasible else s.reason))
+        cells = [s.combination, "yes" if s.feasible else "no", str(s.dim_dafc), str(s.dim_dpfc),
+                 _fmt(s.example_direction, 2), ("" if s.exact else "sampled; ") + ("" if s.feasible else s.reason)]
+        if quality:
+            g = grades.get(s.combination)
+            cells[4:4] = ["-", "-"] if g is None else [_radius(g.wrench_ball.radius), _radius(g.epsilon.radius)]
+        table.add_row(*cells)
     console.print(table)
     if len(rows) < len(summaries):
         console.print(f"(showing feasible combinations only; {len(summaries)} in --json)")
     if stopped:
         console.print(f"(stopped after {limit} feasible combinations, strongest first: --limit)")
     if json_out:
-        data = {"scene": sc.name, "semantics": SEMANTICS, "combinations": [s.to_json() for s in summaries]}
+        listed = [s.to_json() for s in summaries]
+        for row in listed:
+            g = grades.get(row["combination"])
+            if g is not None:
+                row["quality"] = g.to_json()
+        data = {"scene": sc.name, "semantics": SEMANTICS, "combinations": listed}
         _write(json_out, json.dumps(data, indent=2), "--json")
     if plot:
         from ctp.plot import plot_report
@@ -214,6 +236,9 @@ def _print_report(report: Any, sc: Any) -> None:
     ms = report.parts.ms
     console.print(f"  motion space a = {ms.a}, object part a~ = {ms.a_bar}, redundancy {ms.n_redundant}; "
                   f"p = rank(G_c Gamma) = {report.parts.st.p}")
+    tau_max = report.parts.system.tau_max
+    if tau_max is not None:
+        console.print(f"  joint torque limits [N m]: {_fmt(tau_max, 1)} (bound tau_st and the torque set)")
     if report.stationary is not None:
         g = report.stationary
         console.print(f"  stationary grasp (18, most interior): tau_st = {_fmt(g.tau)}  margin {g.margin:.3g}")
@@ -434,10 +459,14 @@ def contacts(
     tolerance: Annotated[float, typer.Option(help="distance within which two surfaces touch (scene units)")] = (
         DEFAULT_TOLERANCE),
     mu: Annotated[float, typer.Option(help="friction of the contacts on bodies that name none ('mu')")] = DEFAULT_MU,
+    touch: Annotated[list[str] | None, typer.Option(
+        help="move q first (within joint limits, nearest the scene's q) until this link touches the object "
+             "without penetrating anything ('<finger>/<link>' or a link name; repeat for several links)")] = None,
 ) -> None:
     """Find the contacts between the object and every finger link and fixed body at the scene's
     configuration (an edge or face on a surface: the corners of the patch), list them and the
-    near misses (closer than 10 tolerances, not touching), and write the complete scene."""
+    near misses (closer than 10 tolerances, not touching), and write the complete scene. With
+    --touch, the configuration is first moved so that the named links touch the object."""
 
     _check_out(out, "--out")
     if not (np.isfinite(tolerance) and tolerance > 0):
@@ -449,6 +478,10 @@ def contacts(
         if not isinstance(data, dict):
             raise SceneError((), "a scene must be a mapping of fields")
         data = {k: v for k, v in data.items() if k != "contacts"}
+        if touch:
+            data, placed = placed_scene_data(data, list(touch), tolerance=tolerance)
+            console.print(f"placed: {', '.join(f'{n} at {d:.2g}' for n, d in placed.touch)}; |q - q_scene| = "
+                          f"{placed.displacement:.4g} rad; deepest pair {placed.min_distance:.2g}", highlight=False)
         full, det = with_detected_contacts(data, tolerance=tolerance, mu=mu)
         sc = scene_from_dict(full)  # the complete scene passes the validation of every scene
     except SceneError as e:

@@ -58,7 +58,8 @@ from scipy.optimize import least_squares
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from analysis.loader import load_scene  # noqa: E402
+from analysis.loader import load_scene, scene_from_dict  # noqa: E402
+from analysis.torque_limits import hand_torque_limits  # noqa: E402
 from analysis.urdf import UrdfFinger, load_urdf_model, resolve_urdf_path  # noqa: E402
 
 Array = NDArray[np.float64]
@@ -339,6 +340,10 @@ def chains_scene(scene: dict[str, Any]) -> dict[str, Any]:
             bodies.update(names)
     for c in out["contacts"]:
         c["body"] = bodies.get(c["body"], c["body"])
+    if "joint_torque_limits" not in scene:  # the URDF's effort limits, which a chain does not carry
+        limits = hand_torque_limits(scene_from_dict(scene))
+        if limits is not None and np.all(np.isfinite(limits)):
+            out["joint_torque_limits"] = [float(x) for x in limits]
     return out
 
 

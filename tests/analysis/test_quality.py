@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import linprog
 
-from analysis.combination import CombinationParts
+from analysis.combination import CombinationParts, analyze_combination
 from analysis.contacts import system_from_arrays
 from analysis.dpfc import dpfc
-from analysis.quality import epsilon, wrench_ball
+from analysis.quality import combination_quality, epsilon, wrench_ball
 from analysis.stationary import stationary_grasps
 
 
@@ -94,3 +94,22 @@ def test_wrench_ball_zero_without_interior() -> None:
 def test_wrench_ball_force_closure_on_fixed_bodies_is_unbounded() -> None:
     # fixed fingers, three frictional contacts at 120 degrees: internal forces resist any wrench
     assert _ball(_tripod(0.1, 0.5), "FFF")[2].radius == np.inf
+
+
+def test_combination_quality_is_the_reports_quality() -> None:
+    """The table's radii (combination_quality) are those of each combination's full report JSON,
+    and a combination without a stationary grasp has none."""
+    sy = _tripod(0.05, 0.5)
+    graded = 0
+    for comb in ("FFF", "FFS", "SSS", "SFD", "FDF"):
+        q = combination_quality(sy, comb)
+        rep = analyze_combination(sy, comb).to_json()
+        if "quality" not in rep:
+            assert q is None
+            continue
+        assert q is not None
+        graded += 1
+        assert q.to_json()["epsilon"] == rep["quality"]["epsilon"]
+        assert q.to_json()["wrench_ball"] == rep["quality"]["wrench_ball"]
+    assert graded >= 3
+    assert combination_quality(sy, "DDD") is None  # gravity, nothing holds the disk

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from independent_urdf import contact_torque_maps
 from numpy.typing import NDArray
 from scipy.optimize import linprog
 from scipy.spatial.transform import Rotation
@@ -163,10 +164,11 @@ def _scales(data: dict[str, Any]) -> tuple[float, float]:
 
 def independent_stationary_lp(data: dict[str, Any], combination: str) -> tuple[bool, Array | None]:
     """Eq. (18) with scipy's HiGHS: is there ``f_c`` with ``G_c f_c = -w_ex``, F-points in their
-    ``k``-sided inscribed pyramid (2-D: the exact cone), S/N-points pressing along the normal and
-    D-points carrying nothing? Returns (feasible, full contact forces ``(L, 3)`` of the least total
-    normal force). Rows are equilibrated in physical units (forces / |w_ex|, moments /
-    (|w_ex| * length))."""
+    ``k``-sided inscribed pyramid (2-D: the exact cone), S/N-points pressing along the normal,
+    D-points carrying nothing and, for URDF arms, joint torques within the URDF's effort limits
+    (Jacobians from pinocchio directly, :mod:`independent_urdf`)? Returns (feasible, full contact
+    forces ``(L, 3)`` of the least total normal force). Rows are equilibrated in physical units
+    (forces / |w_ex|, moments / (|w_ex| * length))."""
     pts, nrm, mu, p_o, w_ex = _contact_data(data)
     dim = int(data["dim"])
     k = int(data.get("friction_cone_sides", 16))
@@ -194,8 +196,16 @@ def independent_stationary_lp(data: dict[str, Any], combination: str) -> tuple[b
         return ok, np.zeros((len(pts), 3)) if ok else None
     A = np.array([_grasp(pts[i], p_o) @ g for i, g in zip(owner, cols, strict=True)]).T  # (6, n)
     scale = np.array([F, F, F, F * ell, F * ell, F * ell])
-    res = linprog(np.ones(len(cols)), A_eq=(A / scale[:, None])[rows], b_eq=(-w_ex / scale)[rows],
-                  bounds=[(0, None)] * len(cols), method="highs")
+    A_ub = b_ub = None
+    if any("urdf" in f for f in data.get("fingers", [])):
+        # |J_c^T f_c| <= tau_max: URDF efforts (or the scene's limits), Jacobians from pinocchio
+        maps, lim = contact_torque_maps(data)
+        T = np.array([maps[i] @ g for i, g in zip(owner, cols, strict=True)]).T  # (M, n)
+        keep = np.isfinite(lim)
+        A_ub = np.vstack([T[keep] / lim[keep, None], -T[keep] / lim[keep, None]])
+        b_ub = np.ones(A_ub.shape[0])
+    res = linprog(np.ones(len(cols)), A_ub=A_ub, b_ub=b_ub, A_eq=(A / scale[:, None])[rows],
+                  b_eq=(-w_ex / scale)[rows], bounds=[(0, None)] * len(cols), method="highs")
     if res.status != 0:
         return False, None
     forces = np.zeros((len(pts), 3))
@@ -409,6 +419,57 @@ def test_baxter_stationary_verdicts_match_an_independent_lp() -> None:
             lp = f"feasible, least total normal force {total:.4g} N" if exists else "infeasible"
             wrong.append(f"{s.combination}: table '{s.reason}', independent LP {lp}")
     assert not wrong, f"{len(wrong)} combinations: " + "; ".join(wrong[:12])
+
+
+#: Examples written by ``ctp contacts --touch`` (issue 10): their table against the independent LP.
+PLACED = ("panda_forearm_box", "allegro_cylinder")
+
+
+@pytest.mark.parametrize("name", PLACED)
+def test_placed_examples_stationary_verdicts_match_an_independent_lp(name: str) -> None:
+    """The Panda pressing the box with its forearm (5 contacts, 243 combinations) and the Allegro
+    fingertips opposing the thumb on a cylinder (4 contacts, 81): where the object can move, the
+    table says "no stationary grasp (18)" exactly when the independent LP finds none, and every
+    feasible combination's stationary forces found by the independent LP pass the certificate."""
+    path = EXAMPLES / f"{name}.json"
+    data = _raw(path)
+    F, _ = _scales(data)
+    wrong, feasible = [], 0
+    for s in _table(path):
+        exists, forces = independent_stationary_lp(data, s.combination)
+        if s.feasible:
+            feasible += 1
+            assert exists and forces is not None, s.combination
+            assert not certificate_errors(data, s.combination, forces), s.combination
+        if s.a_bar == 0:
+            continue
+        total = 0.0 if forces is None else _total_normal(data, forces)
+        if exists and 0.5 * FORCE_BOUND * F < total < 2 * FORCE_BOUND * F:
+            continue
+        holds = exists and total <= FORCE_BOUND * F
+        if holds == (s.reason == "no stationary grasp (18)"):
+            wrong.append(f"{s.combination}: table '{s.reason}', independent LP feasible={exists}")
+    assert not wrong, f"{len(wrong)} combinations: " + "; ".join(wrong[:12])
+    assert feasible > 0
+
+
+def test_placed_examples_have_their_meaning() -> None:
+    """What the examples say they are: the Panda's forearm on the box's top edge pressing it down
+    onto the table (four corners; all stuck is passive: the object cannot move); the Allegro
+    fingertips pressing against the thumb tip, all stuck feasible with the object free to move in
+    every direction (a~ = 6: 16 joints)."""
+    panda = load_scene(EXAMPLES / "panda_forearm_box.json")
+    assert [c.body for c in panda.contacts] == ["arm/panda_link4"] + ["table"] * 4
+    assert panda.contacts[0].normal[2] < -0.5  # the forearm presses down
+    rows = {s.combination: s for s in _table(EXAMPLES / "panda_forearm_box.json")}
+    assert rows["FFFFF"].a_bar == 0 and not rows["FFFFF"].feasible
+    allegro = load_scene(EXAMPLES / "allegro_cylinder.json")
+    assert [c.body for c in allegro.contacts] == ["index/link_3.0_tip", "middle/link_7.0_tip",
+                                                  "ring/link_11.0_tip", "thumb/link_15.0_tip"]
+    n = np.array([c.normal for c in allegro.contacts])
+    assert all(float(n[i] @ n[3]) < -0.8 for i in range(3))  # each fingertip opposes the thumb
+    ffff = {s.combination: s for s in _table(EXAMPLES / "allegro_cylinder.json")}["FFFF"]
+    assert ffff.feasible and ffff.a_bar == 6
 
 
 def _total_normal(data: dict[str, Any], forces: Array) -> float:
