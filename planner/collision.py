@@ -24,6 +24,13 @@
   its first configuration as an allowance (:meth:`CollisionModel.start_allowance`, per pair):
   such a pair may keep its overlap or reduce it but never deepen it; every other pair must stay
   collision-free as before. Without overlaps at the start the check is unchanged.
+* **The object against the fixed bodies.** :meth:`CollisionModel.object_clearance` is the
+  smallest signed distance of the object at a pose to the fixed bodies (an object motion must
+  not push it into the palm or the table). Exact where one of the two is a disk or a sphere
+  (the distance of its centre minus its radius); between two polytopes (boxes, polygons,
+  segments; a cylinder by its rims) the smaller of the signed distances of each one's vertices
+  and edge points, at most ``sample_step`` apart, to the other: a penetration is missed only
+  where an edge crosses the other body over less than ``sample_step``.
 * **Certificate.** :func:`path_clearance_certified` checks a joint-space polyline, every
   configuration and not only samples: the clearance at a checked configuration bounds how far the
   joints may move (``|dx| <= K |dq|``, :meth:`CollisionModel.lipschitz`) before a capsule can
@@ -33,6 +40,7 @@
 from __future__ import annotations
 
 import functools
+import itertools
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -43,10 +51,13 @@ from analysis._types import Array
 from analysis.geometry import box_signed_distance, object_size, shape_signed_distance
 from analysis.kinematics import BodyRef, HandKinematics, SerialChain, segment_distance
 from analysis.rotations import skew
-from analysis.scene import Box, Disk, Scene, Segment, Sphere
+from analysis.scene import Box, Cylinder, Disk, Polygon, Scene, Segment, Sphere
 
 #: Joint-space step (rad) of the dense collision check: 1 mm of joint motion.
 DENSE_STEP = 1e-3
+#: Depth (scene units) below which the object is not said to penetrate a fixed body: the contact
+#: manifold is followed to ``1e-6`` (the residual checked along an object motion).
+PENETRATION_TOL = 1e-6
 #: Fraction of a link starting at the finger's base joint that is not checked against fixed bodies
 #: (the joint housing is mounted on the palm).
 BASE_TRIM = 0.15
@@ -146,6 +157,56 @@ def _shape_segments_distance(shape: object, A: Array, B: Array, dim: int, step: 
     return np.array([_shape_segment_distance(shape, a, b, dim, step) for a, b in zip(A, B, strict=True)])
 
 
+def shape_signed_distances(shape: object, P: Array, dim: int) -> Array:
+    """Signed distances ``(k,)`` (negative inside) of the points ``P`` ``(k, dim)``, in the shape's
+    frame (:func:`analysis.geometry.shape_signed_distance`, vectorised for disks, spheres, boxes
+    and segments); ``inf`` for shapes without a distance (meshes)."""
+    P = np.asarray(P, dtype=float)[:, :dim]
+    if isinstance(shape, Disk | Sphere):
+        return np.asarray(np.linalg.norm(P, axis=1) - shape.radius)
+    if isinstance(shape, Box):
+        c = np.asarray(shape.position if shape.position is not None else np.zeros(dim), dtype=float)[:dim]
+        return np.asarray(box_signed_distance(P, c, np.asarray(shape.size, dtype=float)[:dim] / 2.0))
+    if isinstance(shape, Segment):
+        a, b = (np.asarray(x, dtype=float)[:dim] for x in shape.points)
+        e = b - a
+        t = np.clip((P - a) @ e / max(float(e @ e), 1e-300), 0.0, 1.0)
+        return np.asarray(np.linalg.norm(P - (a + t[:, None] * e), axis=1))
+    out = [shape_signed_distance(shape, p, dim) for p in P]
+    return np.array([np.inf if v is None else v for v in out], dtype=float)
+
+
+def shape_boundary_samples(shape: object, dim: int, step: float) -> Array | None:
+    """Points ``(k, dim)`` of a polytope-like shape, in its frame: its vertices and points of its
+    edges at most ``step`` apart (boxes, polygons, segments; a cylinder: its two rims). ``None``
+    for disks and spheres (their distances are exact from the centre) and meshes."""
+    def edge_points(a: Array, b: Array) -> Array:
+        n = max(2, int(np.ceil(float(np.linalg.norm(b - a)) / step)) + 1)
+        return a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+
+    if isinstance(shape, Box):
+        c = np.asarray(shape.position if shape.position is not None else np.zeros(dim), dtype=float)[:dim]
+        h = np.asarray(shape.size, dtype=float)[:dim] / 2.0
+        signs = np.array(list(itertools.product((-1.0, 1.0), repeat=dim)))  # (2^d, d)
+        V = c + signs * h
+        edges = [edge_points(V[i], V[j]) for i in range(len(V)) for j in range(i + 1, len(V))
+                 if int(np.sum(signs[i] != signs[j])) == 1]
+        return np.vstack(edges)
+    if isinstance(shape, Polygon):
+        V = np.asarray(shape.vertices, dtype=float)
+        return np.vstack([edge_points(V[i], V[(i + 1) % len(V)]) for i in range(len(V))])
+    if isinstance(shape, Segment):
+        a, b = (np.asarray(x, dtype=float)[:dim] for x in shape.points)
+        return edge_points(a, b)
+    if isinstance(shape, Cylinder):
+        n = max(8, int(np.ceil(2.0 * np.pi * shape.radius / step)))
+        ang = 2.0 * np.pi * np.arange(n) / n
+        ring = np.column_stack([shape.radius * np.cos(ang), shape.radius * np.sin(ang)])
+        hh = shape.height / 2.0
+        return np.vstack([np.column_stack([ring, np.full(n, -hh)]), np.column_stack([ring, np.full(n, hh)])])
+    return None
+
+
 @functools.lru_cache(maxsize=256)
 def _unit_samples(n: int) -> Array:
     """``linspace(0, 1, n)`` (cached; never modified)."""
@@ -212,6 +273,39 @@ class CollisionModel:
             if scene.fixed_bodies and model._fixed_clearance(f, k, a, b) < 0.0
         )
         return cls(scene, hand, r, r, apart, mounted)
+
+    def object_clearance(self, position: Array, rotation: Array) -> float:
+        """Smallest signed distance (negative: penetration) of the object at the pose (``position``
+        ``(d,)``, ``rotation`` ``(3, 3)``) to the fixed bodies; ``inf`` without fixed bodies (see the
+        module notes for the polytope case)."""
+        d = self.scene.dim
+        shape = self.scene.object.shape
+        R = np.asarray(rotation, dtype=float)[:d, :d]
+        pos = np.asarray(position, dtype=float)[:d]
+        best = np.inf
+        own = self._boundary("object", shape)
+        for k, fb in enumerate(self.scene.fixed_bodies):
+            if isinstance(shape, Disk | Sphere):  # exact: the centre's distance minus the radius
+                best = min(best, float(shape_signed_distances(fb.shape, pos[None, :], d)[0]) - shape.radius)
+                continue
+            if isinstance(fb.shape, Disk | Sphere):  # fixed disks and spheres are about the origin
+                local = (-pos) @ R
+                best = min(best, float(shape_signed_distances(shape, local[None, :], d)[0]) - fb.shape.radius)
+                continue
+            if own is not None:  # the object's vertices and edges against the body
+                best = min(best, float(shape_signed_distances(fb.shape, own @ R.T + pos, d).min()))
+            theirs = self._boundary(("fixed", k), fb.shape)
+            if theirs is not None:  # the body's vertices and edges against the object
+                best = min(best, float(shape_signed_distances(shape, (theirs - pos) @ R, d).min()))
+        return float(best)
+
+    def _boundary(self, key: Any, shape: object) -> Array | None:
+        """:func:`shape_boundary_samples` of a shape (cached)."""
+        ck = ("boundary", key)
+        if ck not in self._cache:
+            self._cache[ck] = shape_boundary_samples(shape, self.scene.dim, self.sample_step)
+        got: Array | None = self._cache[ck]
+        return got
 
     def fingers_distance(self, i: int, j: int, q: Array) -> float:
         """Smallest clearance between the capsules of fingers ``i`` and ``j``."""

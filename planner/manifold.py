@@ -47,10 +47,21 @@ class ContactManifold:
     of eq. 7 do not move relative to each other), and for every sliding contact (S or N, disks and
     spheres only) the gap between the body's surface and the object's, which is zero while it
     slides (eq. 5: only the normal component is constrained). The Jacobian is ``[J_c, -G^T]`` in
-    these coordinates, so ``F'(x) [dq; ds] = 0`` at ``s = 0`` is ``A_c [dq; dr] = 0`` (eq. 7, 19)."""
+    these coordinates, so ``F'(x) [dq; ds] = 0`` at ``s = 0`` is ``A_c [dq; dr] = 0`` (eq. 7, 19).
+
+    With ``direction`` (a unit ``dr`` ``(D,)``, the analysed DAFC direction of an object motion)
+    ``F`` also has the rows ``B^T s``, ``B`` an orthonormal basis of the directions of
+    ``motion_space`` (``(D, a~)``, the object directions of the motion space, ``Lambda~_r``;
+    default: every direction) orthogonal to ``dr``: the object then moves along the direction
+    whose torque the analysis chose and along no other direction the contacts allow; where the
+    object motions the contacts allow form a flat set the path is the line ``s = t dr``, where
+    they form a curved one (two arms each holding the box with two links) it is the curve of
+    that set tangent to ``dr``. OMPL's constrained planning on this manifold cannot take the
+    object elsewhere."""
 
     def __init__(self, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
-                 sliding: Sequence[int] = (), scene: Scene | None = None):
+                 sliding: Sequence[int] = (), scene: Scene | None = None, direction: Array | None = None,
+                 motion_space: Array | None = None):
         self.hand, self.state, self.dim = hand, state, state.dim
         self.start: Pose = state.pose  # the object pose at s = 0
         self.M, self.D = hand.M, self.start.D
@@ -72,7 +83,23 @@ class ContactManifold:
             ref = hand.resolve_body(state.contacts[i].body)
             assert ref is not None
             self.sliding.append(ref)
-        self.rows = self.dim * len(self.items) + len(self.sliding)
+        #: ``B`` ``(D, k)``: an orthonormal basis of the complement of ``direction`` in the motion
+        #: space (``k = a~ - 1``); the rows ``B^T s = 0`` keep the object on the analysed direction
+        self.direction: Array | None = None
+        self.complement = np.zeros((self.D, 0))
+        if direction is not None:
+            u = np.asarray(direction, dtype=float).reshape(self.D)
+            if not float(np.linalg.norm(u)) > 1e-12:
+                raise ValueError("the direction of an object motion must be non-zero")
+            self.direction = u = u / np.linalg.norm(u)
+            W = np.eye(self.D) if motion_space is None else np.asarray(motion_space, dtype=float).reshape(self.D, -1)
+            C = W - np.outer(u, u @ W)  # the motion space's directions, made orthogonal to u
+            Uc, sv, _ = np.linalg.svd(C, full_matrices=False)
+            self.complement = Uc[:, sv > 1e-9]  # (D, k)
+        self._base = self.dim * len(self.items) + len(self.sliding)
+        #: rows of the contacts (without the direction's)
+        self.contact_rows = self._base
+        self.rows = self._base + self.complement.shape[1]
 
     def body_distance(self, ref: BodyRef, c: Array, q: Array) -> tuple[float, Array, Array]:
         """Distance of the object centre ``c`` ``(d,)`` from the surface of the body ``ref`` at ``q``,
@@ -124,6 +151,7 @@ class ContactManifold:
             out[d * k: d * k + d] = xb - pose.to_world(po)
         for k, ref in enumerate(self.sliding):  # S-points: the gap to the disk/sphere is zero
             out[d * len(self.items) + k] = self.body_distance(ref, pose.position, q)[0] - self.radius
+        out[self._base:] = self.complement.T @ s  # on the line of the analysed direction
         return out
 
     def jacobian(self, x: Array) -> Array:
@@ -149,6 +177,7 @@ class ContactManifold:
             if ref.finger is not None:
                 J[row, : self.M] = -u @ self.hand.point_jacobian(ref, yb, q)
             J[row, self.M: self.M + d] = u
+        J[self._base:, self.M:] = self.complement.T
         return J
 
 

@@ -72,9 +72,8 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
                 for dr in cands:
                     if not oracle.test(dr).member:
                         continue
-                    try:
-                        ts = torque_set(p.system, p.sel, p.ms, p.st, p.fs, grasp, dr, oracle=oracle)
-                    except CTPError:
+                    ts = _torque_set(nodes, p, grasp, oracle, dr)
+                    if ts is None:
                         nodes.reject("torque set (32) empty for a DAFC direction")
                         continue
                     motion = np.concatenate([ts.dq, ts.direction])  # (M + D,) per unit object motion
@@ -92,7 +91,10 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
             continue
         ts, rates, grasp = best
         if dset:
-            dist = min(options.clearance * size / float(np.min(rates)), 0.5 * size)
+            dist = options.clearance * size / float(np.min(rates))
+            if goal.type == "pose":  # towards a goal pose: on to the closest point of the line
+                dist = max(dist, _goal_distance(nodes, state, ts.direction))
+            dist = min(dist, 0.5 * size)
         elif goal.type == "pose":
             assert goal.pose is not None
             dist = min(float(np.linalg.norm(pose_goal_remaining(goal, state))), options.motion_step * size)
@@ -101,7 +103,7 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
         keep = [i for i in range(L) if i not in dset and i not in sset]
         with nodes.timings.measure("motion"):
             straight = integrate_object_motion(nodes.model, state, ts.direction, ts.dq, keep, list(dset), dist,
-                                               check_path=False, sliding=sset)
+                                               check_path=False, sliding=sset, motion_space=p.ms.Lambda_r_t)
         if straight is None:
             nodes.reject("object motion leaves the contact manifold or its end collides")
             continue
@@ -131,6 +133,36 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
     return out
 
 
+#: relative sizes of the nudges of a direction whose torque set the vertex enumeration (cdd, in
+#: floating point) cannot compute: a direction exactly on a symmetry of the grasp (the two-arm hug
+#: lifting straight up) makes its polyhedron degenerate ("numerical inconsistency")
+NUDGES = (1e-5, 1e-4, 1e-3)
+
+
+def _torque_set(nodes: GraphNodes, p: Any, grasp: Any, oracle: Any, dr: Array) -> Any:
+    """The torque set (32) for the DAFC direction ``dr`` ``(D,)``; where the analysis fails on it
+    (a solver error or an empty set), again for ``dr`` nudged by each of :data:`NUDGES` in turn along
+    a fixed (seeded) direction of the motion space, while that is still a DAFC member; ``None`` if
+    every try fails. The step then records the nudged direction, which is what it follows and what
+    verify checks (cosine above 1 - 1e-6 with ``dr``)."""
+    try:
+        return torque_set(p.system, p.sel, p.ms, p.st, p.fs, grasp, dr, oracle=oracle)
+    except CTPError:
+        pass
+    Lr = p.ms.Lambda_r_t  # (D, a~)
+    v = Lr @ np.random.default_rng(nodes.options.seed).standard_normal(Lr.shape[1])
+    v /= max(float(np.linalg.norm(v)), 1e-300)
+    for eps in NUDGES:
+        nudged = (dr + eps * v) / np.linalg.norm(dr + eps * v)
+        if not oracle.test(nudged).member:
+            return None
+        try:
+            return torque_set(p.system, p.sel, p.ms, p.st, p.fs, grasp, nudged, oracle=oracle)
+        except CTPError:
+            continue
+    return None
+
+
 def _slid_contacts(nodes: GraphNodes, state: GraspState, sset: tuple[int, ...],
                    om: ConstrainedObjectMotion) -> tuple[GraspContact, ...]:
     """The contacts after an object motion: sliding ones (``sset``) where their bodies touch the
@@ -157,7 +189,16 @@ def _direction_candidates(nodes: GraphNodes, state: GraspState, p: Any, dset: tu
     cands: list[Array] = []
     goal = nodes.goal
     if goal.type == "pose" and goal.pose is not None:
-        cands.append(pose_goal_remaining(goal, state))
+        rest = pose_goal_remaining(goal, state)
+        # the motion-space direction that brings the pose closest to the goal, each error measured
+        # in its tolerance (a box the arms can lift only while it tips a little: the position
+        # first, the rotation within its looser tolerance), then the plain projection
+        rot_tol = goal.rotation_tol()
+        w = np.r_[np.full(state.dim, 1.0 / goal.position_tol(nodes.size)),
+                  np.full(D - state.dim, 0.0 if rot_tol is None else 1.0 / rot_tol)]
+        c = np.linalg.lstsq(w[:, None] * Lr, w * rest, rcond=None)[0]
+        cands.append(Lr @ c)
+        cands.append(rest)
     if dset:
         # the object moves away from the D-contacts: along the sum of their inward normals
         v = np.zeros(D)
@@ -171,6 +212,20 @@ def _direction_candidates(nodes: GraphNodes, state: GraspState, p: Any, dset: tu
         if np.linalg.norm(c) > 1e-9:
             out.append(c / np.linalg.norm(c))
     return out
+
+
+def _goal_distance(nodes: GraphNodes, state: GraspState, dr: Array) -> float:
+    """How far along the unit direction ``dr`` ``(D,)`` the pose comes closest to the goal pose
+    (errors in units of their tolerances, the rotation not counted where it is free); 0 when
+    ``dr`` leads away."""
+    goal = nodes.goal
+    rest = pose_goal_remaining(goal, state)
+    rot_tol = goal.rotation_tol()
+    d = state.dim
+    w = np.r_[np.full(d, 1.0 / goal.position_tol(nodes.size)),
+              np.full(len(dr) - d, 0.0 if rot_tol is None else 1.0 / rot_tol)]
+    den = float(np.sum((w * dr) ** 2))
+    return max(0.0, float(np.sum(w * w * dr * rest)) / den) if den > 0 else 0.0
 
 
 def _letters(state: GraspState, dset: tuple[int, ...], sset: tuple[int, ...]) -> str:

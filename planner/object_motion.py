@@ -3,16 +3,19 @@ constrained planning on the contact manifold.
 
 The analysis fixes the start, the direction ``dr`` (a DAFC member) and the finger motion ``dq``
 chosen by (31). :func:`integrate_object_motion` follows them in small steps on
-``A_c [dq; dr] = 0``, each projected back onto the contact manifold (Gauss-Newton on ``q``,
-:func:`project_contacts`: each F-point's body point coincides with its object point; with sliding
-contacts, :func:`~planner.manifold.project_manifold` on hand and object together), which gives the
-end configuration (the D-contacts separated by the planned clearance). :func:`plan_object_motion`
+``A_c [dq; dr] = 0``, each projected back onto the contact manifold with the object held to the
+analysed direction (:class:`~planner.manifold.ContactManifold` with ``direction``:
+:func:`~planner.manifold.project_manifold` on hand and object together), which gives the end
+configuration (the D-contacts separated by the planned clearance). :func:`plan_object_motion`
 then plans the path between the two ends with OMPL's constrained planning: a
 ``ProjectedStateSpace`` over ``x = [q; s]`` (hand configuration and object displacement) with the
-constraint :class:`~planner.manifold.ContactManifold` (the F-points stay together, exactly, not
-only to first order), ``RRTConnect`` whose motions are manifold geodesics checked for joint limits
-and collisions, and the solution densified on the manifold until no joint moves more than
-:data:`~planner.collision.DENSE_STEP` between checked states, each of which is checked again.
+same constraint (the F-points stay together, exactly, not only to first order; the object moves
+along ``dr`` and along no other direction of the motion space, so a path cannot take it where its
+torque does not), ``RRTConnect`` whose motions are manifold geodesics checked for joint limits and
+collisions (the links against the object, the fixed bodies and each other, and the object against
+the fixed bodies), and the solution densified on the manifold until no joint moves more than
+:data:`~planner.collision.DENSE_STEP` between checked states, each of which is checked again, and
+every segment of the object path within :data:`MIN_DIRECTION_COSINE` of ``dr``.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ from analysis.geometry import shape_signed_distance
 from analysis.kinematics import BodyRef, HandKinematics
 from analysis.pose import Pose
 from planner.budget import CheckBudget
-from planner.collision import DENSE_STEP, CollisionModel
+from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel
 from planner.ik import joint_limits
 from planner.manifold import ContactManifold, pose_displacement, project_manifold
 from planner.state import GraspContact, GraspState
@@ -48,6 +51,10 @@ class ObjectMotion:
     separations: Array  # (#D,) final gap of each separating contact
     length: float  # object path length (pose-vector norm)
     max_residual: float  # largest contact-constraint residual after projection
+    #: the unit object direction ``dr`` ``(D,)`` followed (the analysed DAFC direction), if any
+    direction: Array | None = None
+    #: ``(D, a~)`` the motion space's object directions it was followed in (None: every direction)
+    motion_space: Array | None = None
 
 
 def project_contacts(
@@ -88,21 +95,25 @@ def moved(state: GraspState, pose_step: Array) -> GraspState:
 class _MotionCheck:
     """Validity of hand configurations during an object motion that starts at ``state``: joint
     limits, and collisions with the contact links (``busy``) allowed to touch the object and the
-    overlaps present at the start allowed to persist (:meth:`CollisionModel.start_allowance`)."""
+    overlaps present at the start allowed to persist (:meth:`CollisionModel.start_allowance`),
+    and the object clear of the fixed bodies (:meth:`CollisionModel.object_clearance`: it may touch
+    them, or keep an overlap it has at the start, but not go deeper than :data:`PENETRATION_TOL`)."""
 
     model: CollisionModel
     touching: list[list[BodyRef]]  # per finger
     allow: list[Array]  # per finger
     limits: list[tuple[Array, Array]]  # per finger
+    object_floor: float = -PENETRATION_TOL  # smallest object clearance to the fixed bodies allowed
 
     @classmethod
     def of(cls, model: CollisionModel, state: GraspState, busy: Sequence[int]) -> _MotionCheck:
         hand = model.hand
         refs = [hand.resolve_body(state.contacts[i].body) for i in busy]
         F = range(len(hand.fingers))
+        start = model.object_clearance(state.position, state.rotation)
         return cls(model, [[b for b in refs if b is not None and b.finger == f] for f in F],
                    [model.start_allowance(f, state.q, state.position, state.rotation) for f in F],
-                   [joint_limits(hand, f) for f in F])
+                   [joint_limits(hand, f) for f in F], min(0.0, start) - PENETRATION_TOL)
 
     def __call__(self, q: Array, pose: Pose) -> bool:
         """Is the hand configuration ``q`` ``(M,)`` valid with the object at ``pose``?"""
@@ -114,7 +125,7 @@ class _MotionCheck:
                 return False
             if self.model.finger_clearance(f, q, position, rotation, self.touching[f], self.allow[f]) < -1e-9:
                 return False
-        return True
+        return self.model.object_clearance(position, rotation) >= self.object_floor
 
 
 def integrate_object_motion(
@@ -128,17 +139,23 @@ def integrate_object_motion(
     steps: int = 20,
     check_path: bool = True,
     sliding: Sequence[int] = (),
+    motion_space: Array | None = None,
 ) -> ObjectMotion | None:
-    """Move the object by ``distance`` along ``dr`` with the fingers along ``dq``, projecting on
-    the sticking contacts after every step; ``None`` if a link would penetrate the object or a
-    separating contact would not separate. With ``check_path = False`` only the end configuration
-    is checked for collisions (the path is then planned by :func:`plan_object_motion`).
+    """Move the object by ``distance`` along ``dr`` with the fingers along ``dq``: steps
+    ``[q; s] + h [dq; dr]``, each projected onto :class:`ContactManifold` with the direction rows
+    (minimum-norm Newton steps on hand and object together), so the object keeps moving along
+    ``dr`` and along no other direction of ``motion_space`` (``(D, a~)``, the motion space's
+    object directions ``Lambda~_r``; default every direction: a straight line); ``None`` if the
+    contacts cannot follow (residual above ``1e-6``), a link would penetrate the object or the
+    object a fixed body, or a separating contact would not separate. With ``check_path = False``
+    only the end configuration is checked for collisions (the path is then planned by
+    :func:`plan_object_motion`).
 
-    ``sliding`` contacts (S or N; disk and sphere objects) keep touching while they slide: the
-    object then follows the projection of ``[q; s] + h [dq; dr]`` onto :class:`ContactManifold`
-    (minimum-norm Newton steps on hand and object together), not exactly the straight line."""
+    ``sliding`` contacts (S or N; disk and sphere objects) keep touching while they slide."""
     hand = model.hand
-    man = ContactManifold(hand, state, sticking, sliding, model.scene) if sliding else None
+    dr = np.asarray(dr, dtype=float)
+    dr = dr / np.linalg.norm(dr)
+    man = ContactManifold(hand, state, sticking, sliding, model.scene, direction=dr, motion_space=motion_space)
     x = np.concatenate([state.q, np.zeros(len(dr))])
     h = distance / steps
     cur = state
@@ -147,13 +164,9 @@ def integrate_object_motion(
     worst_res = 0.0
     valid = _MotionCheck.of(model, state, (*sticking, *separating, *sliding))
     for _ in range(steps):
-        if man is None:
-            cur = moved(cur, h * dr)
-            q, res = project_contacts(hand, cur, q + h * dq, sticking)
-        else:
-            x, res = project_manifold(man, x + h * np.concatenate([dq, dr]))
-            q = x[: hand.M]
-            cur = cur.with_pose(man.pose(x[hand.M:]), q)
+        x, res = project_manifold(man, x + h * np.concatenate([dq, dr]))
+        q = x[: hand.M]
+        cur = cur.with_pose(man.pose(x[hand.M:]), q)
         worst_res = max(worst_res, res)
         if res > 1e-6:
             return None
@@ -176,7 +189,8 @@ def integrate_object_motion(
     if len(seps_a) and np.any(seps_a <= 0.0):
         return None
     length = float(np.sum(np.linalg.norm(np.diff(np.array(poses), axis=0), axis=1)))
-    return ObjectMotion(np.array(qs), np.array(poses), seps_a, length, worst_res)
+    return ObjectMotion(np.array(qs), np.array(poses), seps_a, length, worst_res, dr,
+                        None if motion_space is None else np.asarray(motion_space, dtype=float))
 
 
 def keep_contacts(state: GraspState, keep: Sequence[int], q: Array) -> GraspState:
@@ -224,45 +238,77 @@ def plan_object_motion(
     links may touch the object, overlaps present at the start may not deepen), and the solution
     densified on the manifold until no joint moves more than :data:`DENSE_STEP` between two
     checked states, every one of which is re-checked (constraint residual below
-    ``100 * tolerance`` and collision-free). ``None`` if OMPL finds no path or the check fails."""
+    ``100 * tolerance`` and collision-free). The constraint holds the object to the direction of
+    ``goal`` (``goal.direction`` in ``goal.motion_space``; else the straight line to its end), the
+    validity checker keeps it between the two ends of that path and clear of the fixed bodies, and
+    every segment of the densified object path must lie within :data:`MIN_DIRECTION_COSINE` of
+    the direction. ``None`` if OMPL finds no path or the check fails."""
     hand = model.hand
-    man = ContactManifold(hand, state, sticking, sliding, model.scene)
-    M, D = man.M, man.D
-    n = M + D
     q0, q1 = state.q, goal.q_path[-1]
     s1 = pose_displacement(state, goal.pose_path[-1])
+    direction = goal.direction
+    if direction is None and float(np.linalg.norm(s1)) > 1e-12:
+        direction = s1 / np.linalg.norm(s1)
+    man = ContactManifold(hand, state, sticking, sliding, model.scene, direction=direction,
+                          motion_space=goal.motion_space)
+    M, D = man.M, man.D
+    n = M + D
     x0, x1 = np.concatenate([q0, np.zeros(D)]), np.concatenate([q1, s1])
     check = _MotionCheck.of(model, state, (*sticking, *separating, *sliding))
     limits = check.limits
+    t1 = 0.0 if man.direction is None else float(man.direction @ s1)  # progress along dr at the end
 
     def valid(x: Array) -> bool:
+        if man.direction is not None:  # the object between the two ends of its line
+            t = float(man.direction @ x[M:])
+            if t < -1e-9 or t > t1 + 1e-9:
+                return False
         return check(x[:M], man.pose(x[M:]))
 
-    if man.rows == 0 or not valid(x0) or not valid(x1):
+    if man.contact_rows == 0 or not valid(x0) or not valid(x1):
         return None
     if float(np.linalg.norm(man.function(x1))) > 100 * tolerance:
         return None
 
+    J0 = man.jacobian(x0)
+    rank = int(np.linalg.matrix_rank(J0, tol=1e-9))
+    if rank >= n:  # the contacts and the direction leave no motion
+        return None
+    # OMPL needs fewer constraint rows than ambient dimensions: redundant rows (several contacts on
+    # one link, a grasp without finger redundancy on the direction's line) are combined into
+    # ``rank`` rows along the left singular vectors of F'(x0); every state planned is checked on
+    # the full F below (valid_full), so the combination cannot let a state leave the manifold
+    U = np.linalg.svd(J0)[0][:, :rank].T if man.rows >= n else None  # (rank, rows)
+
+    def valid_full(x: Array) -> bool:
+        return U is None or float(np.linalg.norm(man.function(x))) <= 100 * tolerance
+
     class _Constraint(ob.Constraint):
         def __init__(self) -> None:
-            super().__init__(n, man.rows)
+            super().__init__(n, man.rows if U is None else rank)
 
         def function(self, x: Any, out: Any) -> None:
-            out[:] = man.function(np.asarray(x))
+            F = man.function(np.asarray(x))
+            out[:] = F if U is None else U @ F
 
         def jacobian(self, x: Any, out: Any) -> None:
-            out[:, :] = man.jacobian(np.asarray(x))
+            J = man.jacobian(np.asarray(x))
+            out[:, :] = J if U is None else U @ J
 
     ou.setLogLevel(ou.LOG_NONE)
     ou.RNG.setSeed(int(seed) + 1)
     constraint = _Constraint()
     constraint.setTolerance(tolerance)
     constraint.setMaxIterations(100)
-    rank = int(np.linalg.matrix_rank(man.jacobian(x0), tol=1e-9))
     constraint.setManifoldDimension(n - rank)
     span = np.abs(x1 - x0)
     margin = np.maximum(span, 1e-3)
     lo, hi = np.minimum(x0, x1) - margin, np.maximum(x0, x1) + margin
+    if man.direction is not None:  # the object's samples about its integrated path (a line or a curve)
+        S = np.array([pose_displacement(state, v) for v in goal.pose_path])  # (k, D)
+        pad = 1e-9 + 0.05 * (S.max(axis=0) - S.min(axis=0))
+        lo[M:] = np.minimum(S.min(axis=0), np.minimum(x0[M:], x1[M:])) - pad
+        hi[M:] = np.maximum(S.max(axis=0), np.maximum(x0[M:], x1[M:])) + pad
     for f in range(len(hand.fingers)):  # joint limits bound the ambient box too
         sl = hand.finger_slice(f)
         lo[sl] = np.maximum(lo[sl], np.minimum(limits[f][0], np.minimum(x0[sl], x1[sl])))
@@ -283,7 +329,7 @@ def plan_object_motion(
 
     ss = og.SimpleSetup(si)
     budget = CheckBudget(checks, time_limit)
-    ss.setStateValidityChecker(budget.counted(lambda st: valid(read(st))))
+    ss.setStateValidityChecker(budget.counted(lambda st: valid(x := read(st)) and valid_full(x)))
     a, b = space.allocState(), space.allocState()
     a.copy([float(v) for v in x0])
     b.copy([float(v) for v in x1])
@@ -306,10 +352,28 @@ def plan_object_motion(
         return None
     if float(np.max(np.abs(X[-1] - x1))) > 1e-6:
         return None
+    if man.direction is not None and direction_cosines(X[:, M:], man.direction).min() < MIN_DIRECTION_COSINE:
+        return None  # a segment of the object path goes back along its line
     poses = np.array([man.pose(x[M:]).vector() for x in X])  # (k, D)
     length = float(np.sum(np.linalg.norm(np.diff(poses, axis=0), axis=1)))
     return ConstrainedObjectMotion(X[:, :M], poses, X[:, M:], goal.separations, length, residual, step, len(X),
                                    planner_states, dt)
+
+
+#: every segment of an object path lies within this cosine of the analysed direction (issue 11)
+MIN_DIRECTION_COSINE = 0.99
+
+
+def direction_cosines(S: Array, direction: Array, floor: float = 1e-12) -> Array:
+    """Cosines ``(k,)`` between the segments of the object displacement path ``S`` ``(n, D)`` (the
+    ``s`` of :class:`ContactManifold`) and the unit ``direction`` ``(D,)``; segments shorter than
+    ``floor`` (the object at rest while the hand moves) count as 1. ``ones(0)`` for one state."""
+    seg = np.diff(np.asarray(S, dtype=float), axis=0)
+    if not len(seg):
+        return np.ones(0)
+    nrm = np.linalg.norm(seg, axis=1)
+    cos = (seg @ np.asarray(direction, dtype=float)) / np.where(nrm > floor, nrm, 1.0)
+    return np.asarray(np.where(nrm > floor, cos, 1.0))
 
 
 def _densify(man: ContactManifold, X: Array, max_step: float, tolerance: float) -> Array:

@@ -18,7 +18,7 @@ class PlannerOptions:
     #: so that a plan does not depend on the machine's speed (:class:`planner.budget.CheckBudget`)
     ompl_checks: int = 300
     #: wall-clock safety net of one OMPL query (seconds), far above what ``ompl_checks`` takes
-    ompl_time: float = 2.0
+    ompl_time: float = 30.0
     dafc_samples: int = 64
     seed: int = 0
     #: object motions may also separate single finger contacts (more edges, slower); by default

@@ -11,7 +11,10 @@ contact point lies on its body and on the object) and:
 * ``object_motion`` (30-32): every waypoint of the path lies on the contact manifold (F-points
   together, S-points touching), the combination has a stationary grasp, the direction is a DAFC
   member (22 by the LP oracle), the torque set (32) for it is not empty, and the chosen torque's
-  contact forces satisfy (32) (residuals);
+  contact forces satisfy (32) (residuals); every segment of the object path lies within 0.99
+  cosine of that re-analysed direction (the object goes where its torque moves it), and densely
+  (waypoints at most ``DENSE_STEP`` apart), at every waypoint, the object penetrates no fixed
+  body and no link penetrates the object, a fixed body or another link;
 * every state after a step holds the object (18 for all-F).
 
 :func:`verify_plan` returns the list of problems (empty when every step passes).
@@ -21,13 +24,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from analysis._types import Array
 from analysis.contacts import build_system
 from analysis.exceptions import CTPError
 from analysis.kinematics import BodyRef, HandKinematics
+from analysis.pose import Pose
 from analysis.scene import Scene
 from analysis.torques import torque_set
-from planner.collision import CollisionModel, path_clearance_certified
+from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel, path_clearance_certified
 from planner.manifold import ContactManifold, pose_displacement
+from planner.object_motion import MIN_DIRECTION_COSINE, direction_cosines
 from planner.plan import Plan, PlanStep
 from planner.state import StateAnalysis, all_f
 
@@ -87,9 +93,57 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
                 res = ts.residuals(ts.f_c)
                 if res["inequality"] > 1e-6 or res.get("equality", 0.0) > 1e-6:
                     problems.append(f"{tag}: chosen torque violates (32): {res}")
+                problems.extend(_direction_problems(step, np.asarray(ts.direction, float), tag))
             except CTPError as e:
                 problems.append(f"{tag}: torque set (32) empty: {e}")
+        problems.extend(_penetration_problems(scene, hand, step, tag))
     return problems
+
+
+def _direction_problems(step: PlanStep, direction: Array, tag: str) -> list[str]:
+    """Every segment of the object path goes along the re-analysed DAFC ``direction`` ``(D,)``
+    (the motion its torque produces), within :data:`MIN_DIRECTION_COSINE`."""
+    t = step.transition
+    S = np.array([pose_displacement(step.before, pose) for pose in t.object_path])  # (n, D)
+    if len(S) < 2 or float(np.linalg.norm(S[-1] - S[0])) <= 1e-12:
+        return [f"{tag}: the object does not move"]
+    cos = direction_cosines(S, direction / np.linalg.norm(direction))
+    k = int(np.argmin(cos))
+    if cos[k] < MIN_DIRECTION_COSINE:
+        return [f"{tag}: object path segment {k} leaves the analysed direction (cosine {cos[k]:.4f} < "
+                f"{MIN_DIRECTION_COSINE})"]
+    return []
+
+
+def _penetration_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
+    """Densely, at every waypoint of an object motion (consecutive waypoints at most
+    :data:`DENSE_STEP` apart in every joint): the object does not penetrate a fixed body (deeper
+    than :data:`PENETRATION_TOL`, or than an overlap it has at the start) and no finger link
+    penetrates the object, a fixed body, another link (the links in contact may touch the object;
+    overlaps at the start may persist, not deepen: :meth:`CollisionModel.start_allowance`)."""
+    t = step.transition
+    model = CollisionModel.of(scene, hand)
+    out: list[str] = []
+    if len(t.q_path) > 1 and float(np.max(np.abs(np.diff(t.q_path, axis=0)))) > DENSE_STEP * (1 + 1e-9):
+        out.append(f"{tag}: the path is not dense (a joint moves {np.max(np.abs(np.diff(t.q_path, axis=0))):.3g} "
+                   f"rad between waypoints, more than {DENSE_STEP:g})")
+    b = step.before
+    refs = [hand.resolve_body(c.body) for c in b.contacts]
+    touching = [[r for r in refs if r is not None and r.finger == f] for f in range(len(hand.fingers))]
+    allow = [model.start_allowance(f, b.q, b.position, b.rotation) for f in range(len(hand.fingers))]
+    floor = min(0.0, model.object_clearance(b.position, b.rotation)) - PENETRATION_TOL
+    for k, (q, vec) in enumerate(zip(t.q_path, t.object_path, strict=True)):
+        pose = Pose.from_vector(vec, scene.dim)
+        oc = model.object_clearance(pose.position, pose.rotation)
+        if oc < floor:
+            out.append(f"{tag}: at waypoint {k} the object penetrates a fixed body by {-oc:.3g}")
+            break
+        worst = min(model.finger_clearance(f, q, pose.position, pose.rotation, touching[f], allow[f])
+                    for f in range(len(hand.fingers)))
+        if worst < -1e-9:
+            out.append(f"{tag}: at waypoint {k} a finger link penetrates (clearance {worst:.3g})")
+            break
+    return out
 
 
 def _manifold_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:

@@ -10,7 +10,6 @@ planned path in the metric ``|dp| + s |dtheta|`` (:meth:`analysis.pose.Pose.dist
 
 from __future__ import annotations
 
-import itertools
 import math
 from collections.abc import Callable
 
@@ -26,22 +25,44 @@ Mask = NDArray[np.bool_]
 
 
 def path_deviation(pose: Pose, path: Array, s: float) -> float:
-    """Distance of ``pose`` from the polyline of pose vectors ``path`` ``(k, D)``: the nearest
-    point is found in the weighted coordinates ``(p, s rot)``, the distance is
-    :meth:`Pose.distance` ``|dp| + s |dtheta|`` (``s`` the object size)."""
+    """Distance of ``pose`` from the polyline of pose vectors ``path`` ``(k, D)``: on every segment
+    the nearest point is found in the weighted coordinates ``(p, s rot)``, the distance is
+    :meth:`Pose.distance` ``|dp| + s |dtheta|`` (``s`` the object size) to it, and the smallest
+    over the segments is returned (vectorised over the segments: it runs at every MuJoCo step of
+    the continuous replay)."""
     dim = pose.dim
+    path = np.asarray(path, dtype=float)
     if len(path) == 1 or np.allclose(path, path[0]):
         return pose.distance(Pose.from_vector(path[0], dim), s)
     w = np.ones(path.shape[1])
     w[dim:] = s
     x = pose.vector() * w  # (D,)
-    best = math.inf
-    for a, b in itertools.pairwise(path):
-        seg = (b - a) * w
-        n2 = float(seg @ seg)
-        u = 0.0 if n2 == 0 else float(np.clip((x - a * w) @ seg / n2, 0.0, 1.0))
-        best = min(best, pose.distance(Pose.from_vector(a + u * (b - a), dim), s))
-    return best
+    A, B = path[:-1], path[1:]  # (k - 1, D)
+    seg = (B - A) * w
+    n2 = np.einsum("ij,ij->i", seg, seg)
+    u = np.clip(np.einsum("ij,ij->i", x - A * w, seg) / np.where(n2 > 0, n2, 1.0), 0.0, 1.0)
+    P = A + np.where(n2 > 0, u, 0.0)[:, None] * (B - A)  # (k - 1, D) nearest pose vectors
+    dp = np.linalg.norm(P[:, :dim] - pose.position, axis=1)
+    return float(np.min(dp + s * rotation_angles(pose, P[:, dim:])))
+
+
+def rotation_angles(pose: Pose, rot: Array) -> Array:
+    """Angles ``(k,)`` of the rotations from the poses' orientations ``rot`` (2-D: angles ``(k, 1)``;
+    3-D: rotation vectors ``(k, 3)``) to ``pose``'s (:meth:`Pose.rotation_angle_to`, vectorised)."""
+    if pose.dim == 2:
+        diff = pose.angle - rot[:, 0]
+        return np.asarray(np.abs(diff - 2.0 * math.pi * np.round(diff / (2.0 * math.pi))))
+    th = np.linalg.norm(rot, axis=1)  # (k,)
+    k = rot / np.where(th > 0, th, 1.0)[:, None]
+    K = np.zeros((len(rot), 3, 3))
+    K[:, 0, 1], K[:, 0, 2], K[:, 1, 2] = -k[:, 2], k[:, 1], -k[:, 0]
+    K[:, 1, 0], K[:, 2, 0], K[:, 2, 1] = k[:, 2], -k[:, 1], k[:, 0]
+    R = np.eye(3) + np.sin(th)[:, None, None] * K + (1.0 - np.cos(th))[:, None, None] * (K @ K)  # (k, 3, 3)
+    E = pose.rotation @ np.transpose(R, (0, 2, 1))  # R_pose R_i^T
+    cos = (np.trace(E, axis1=1, axis2=2) - 1.0) / 2.0
+    sin = 0.5 * np.linalg.norm(np.stack([E[:, 2, 1] - E[:, 1, 2], E[:, 0, 2] - E[:, 2, 0],
+                                         E[:, 1, 0] - E[:, 0, 1]], axis=1), axis=1)
+    return np.asarray(np.arctan2(sin, cos))
 
 
 def arc_fractions(path: Array) -> Array:
@@ -79,4 +100,4 @@ def driven_profile(q_path: Array, mask: Mask, q_start: Array, duration: float) -
     return q_of
 
 
-__all__ = ["Mask", "arc_fractions", "driven_profile", "interp_rows", "move_time", "path_deviation"]
+__all__ = ["Mask", "arc_fractions", "driven_profile", "interp_rows", "move_time", "path_deviation", "rotation_angles"]

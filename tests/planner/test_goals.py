@@ -23,6 +23,8 @@ from planner.goals import DEFAULT_POSITION_TOLERANCE, goal_reached, pose_errors
 from planner.object_motion import keep_contacts
 from planner.plan import START_MEETS_GOAL, Plan
 from planner.state import AnalysisCache, GraspContact, state_from_scene
+from planner.transition import ObjectMotionFigures
+from planner.verify import verify_plan
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -84,9 +86,23 @@ def test_combination_already_met_at_the_start_says_so(box_scene: Scene) -> None:
 
 
 def test_combination_goal_that_is_not_reached_is_no_plan(box_scene: Scene) -> None:
-    p = plan(box_scene, Goal(type="combination", combination="FFFFDD"), max_expansions=2)
+    # the left arm cannot let go (its links cannot retreat, and the rest do not hold the box)
+    p = plan(box_scene, Goal(type="combination", combination="DDFFFF"), max_expansions=2)
     assert not p.found and p.outcome == "no_plan" and p.steps == ()
     assert p.reason and p.reason != "goal reached"
+
+
+def test_combination_goal_ffffdd_is_reached_by_lifting_the_box_off_the_table(box_scene: Scene) -> None:
+    """FFFFDD: the arms lift the box (an object motion FFFFDD) until the table contacts have let
+    go; the scene's four arm contacts remain, and verify passes (direction, penetration)."""
+    p = plan(box_scene, Goal(type="combination", combination="FFFFDD"), max_expansions=2)
+    assert p.found and p.outcome == "reached", p.reason
+    assert [(s.transition.kind, s.transition.combination) for s in p.steps] == [("object_motion", "FFFFDD")]
+    assert [c.origin for c in p.steps[-1].after.contacts] == [0, 1, 2, 3]
+    figures = p.steps[0].transition.figures
+    assert isinstance(figures, ObjectMotionFigures)
+    assert p.displacement[2] > 0.0 and all(g > 0.0 for g in figures.separations)
+    assert verify_plan(box_scene, p) == []
 
 
 @pytest.mark.parametrize(("comb", "match"), [
