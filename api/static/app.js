@@ -1,13 +1,17 @@
-// Dashboard of the contact-state transition planner. Plain JS, no build step, no downloads.
-"use strict";
+// Dashboard of the contact-state transition planner. Plain ES modules, no build step, no downloads:
+// 2-D scenes drawn in SVG, 3-D scenes in WebGL (view3d.js: three.js and urdf-loader, vendored).
+
+import { COLORS, SceneView3D, interpolatePose3, formatLength } from "./view3d.js";
 
 const $ = (id) => document.getElementById(id);
 const SVGNS = "http://www.w3.org/2000/svg";
-const COLORS = { F: "#2a9d8f", S: "#e9a03b", D: "#d1495b", N: "#577590" };
+const PAGE = 100;          // table rows per page
+const MAX_FRAMES = 1500;   // plan animation frames (waypoints and the frames between them)
 const state = {
-  scene: null, geometry: null, rows: [], combination: null, report: null,
-  view: { yaw: -0.6, pitch: 0.45 }, dafcView: { yaw: -0.7, pitch: 0.5 },
+  scene: null, geometry: null, rows: [], filtered: [], page: 0, combination: null, report: null,
+  dafcView: { yaw: -0.7, pitch: 0.5 }, dafcPick: null,
   extraBounds: [], job: null, pollTimer: null, plan: null, frames: [], frameIndex: 0, playTimer: null,
+  view3d: null, sceneToken: 0,
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -34,9 +38,12 @@ async function api(method, url, body) {
 const add = (a, b) => a.map((x, i) => x + b[i]);
 const sub = (a, b) => a.map((x, i) => x - b[i]);
 const mul = (a, s) => a.map((x) => x * s);
+const dot = (a, b) => a.reduce((s, x, i) => s + x * b[i], 0);
 const norm = (a) => Math.hypot(...a);
+const lerp = (a, b, u) => a.map((x, i) => x + (b[i] - x) * u);
 function rot2(v, t) { const c = Math.cos(t), s = Math.sin(t); return [c * v[0] - s * v[1], s * v[0] + c * v[1]]; }
 function matvec(R, v) { return [0, 1, 2].map((i) => R[i][0] * v[0] + R[i][1] * v[1] + R[i][2] * v[2]); }
+function tmatvec(R, v) { return [0, 1, 2].map((i) => R[0][i] * v[0] + R[1][i] * v[1] + R[2][i] * v[2]); }
 function quatToMat(q) {
   const [w, x, y, z] = q;
   return [[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
@@ -51,27 +58,61 @@ function rotvecToMat(r) {
           [k[1] * k[0] * v + k[2] * s, c + k[1] * k[1] * v, k[1] * k[2] * v - k[0] * s],
           [k[2] * k[0] * v - k[1] * s, k[2] * k[1] * v + k[0] * s, c + k[2] * k[2] * v]];
 }
-function matmul(A, B) { return [0, 1, 2].map((i) => [0, 1, 2].map((j) => A[i][0] * B[0][j] + A[i][1] * B[1][j] + A[i][2] * B[2][j])); }
-function perpBasis(n) {
-  const a = Math.abs(n[0]) < 0.9 ? [1, 0, 0] : [0, 1, 0];
-  const cross = (u, v) => [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
-  const t1 = cross(n, a); const t1n = mul(t1, 1 / norm(t1));
-  return [t1n, cross(n, t1n)];
+
+// object frames: a pose vector (2-D [x, y, θ], 3-D [p, rotation vector]) or null (the scene's pose)
+
+function frameOf(scene, pose) {
+  if (scene.dim === 2) {
+    return pose ? { p: pose.slice(0, 2), t: pose[2] } : { p: scene.object.pose.position, t: scene.object.pose.angle || 0 };
+  }
+  return pose ? { p: pose.slice(0, 3), R: rotvecToMat(pose.slice(3, 6)) }
+    : { p: scene.object.pose.position, R: quatToMat(scene.object.pose.quat_wxyz || [1, 0, 0, 0]) };
+}
+const toWorld = (scene, f, v) => (scene.dim === 2 ? add(f.p, rot2(v, f.t)) : add(f.p, matvec(f.R, v)));
+const toLocal = (scene, f, x) => (scene.dim === 2 ? rot2(sub(x, f.p), -f.t) : tmatvec(f.R, sub(x, f.p)));
+const dirToWorld = (scene, f, v) => (scene.dim === 2 ? rot2(v, f.t) : matvec(f.R, v));
+const dirToLocal = (scene, f, v) => (scene.dim === 2 ? rot2(v, -f.t) : tmatvec(f.R, v));
+
+function shapeNormalLocal(scene, x) {
+  // inward unit normal of the object's surface nearest the object-frame point x, or null
+  const s = scene.object.shape, o = s.position || x.map(() => 0), y = sub(x, o);
+  if (s.type === "disk" || s.type === "sphere") { const n = norm(y); return n > 1e-12 ? mul(y, -1 / n) : null; }
+  if (s.type === "box") {
+    let best = 0, val = -Infinity;
+    y.forEach((c, i) => { const r = Math.abs(c) / (s.size[i] / 2); if (r > val) { val = r; best = i; } });
+    const n = y.map(() => 0); n[best] = y[best] > 0 ? -1 : 1;
+    return n;
+  }
+  if (s.type === "cylinder") {
+    const rr = Math.hypot(y[0], y[1]);
+    if (Math.abs(y[2]) / (s.height / 2) > rr / s.radius) return [0, 0, y[2] > 0 ? -1 : 1];
+    return rr > 1e-12 ? [-y[0] / rr, -y[1] / rr, 0] : null;
+  }
+  return null;
 }
 
 // ---------------------------------------------------------------------------------------------
-// projection: 2-D scenes as they are (y up), 3-D scenes orthographic with drag-rotate
+// SVG helpers
 
-function makeProjector(dim, view, pts, width, height, margin = 30) {
+function el(parent, name, attrs, text) {
+  const e = document.createElementNS(SVGNS, name);
+  for (const [k, v] of Object.entries(attrs || {})) e.setAttribute(k, v);
+  if (text !== undefined) e.textContent = text;
+  parent.appendChild(e);
+  return e;
+}
+const pts = (list) => list.map((p) => `${p[0].toFixed(2)},${p[1].toFixed(2)}`).join(" ");
+
+function makeProjector(dim, view, points, width, height, margin = 30) {
   const raw = (p) => {
     if (dim === 2) return [p[0], p[1], 0];
     const [x, y, z] = p;
     const cy = Math.cos(view.yaw), sy = Math.sin(view.yaw), cp = Math.cos(view.pitch), sp = Math.sin(view.pitch);
-    const x1 = cy * x - sy * y, y1 = sy * x + cy * y;          // yaw about z
-    return [x1, cp * z - sp * y1, sp * z + cp * y1];           // pitch: screen-up, depth
+    const x1 = cy * x - sy * y, y1 = sy * x + cy * y;
+    return [x1, cp * z - sp * y1, sp * z + cp * y1];
   };
   let minx = Infinity, maxx = -Infinity, miny = Infinity, maxy = -Infinity;
-  for (const p of pts) {
+  for (const p of points) {
     const q = raw(p);
     minx = Math.min(minx, q[0]); maxx = Math.max(maxx, q[0]); miny = Math.min(miny, q[1]); maxy = Math.max(maxy, q[1]);
   }
@@ -83,15 +124,6 @@ function makeProjector(dim, view, pts, width, height, margin = 30) {
   f.scale = scale;
   return f;
 }
-
-function el(parent, name, attrs, text) {
-  const e = document.createElementNS(SVGNS, name);
-  for (const [k, v] of Object.entries(attrs || {})) e.setAttribute(k, v);
-  if (text !== undefined) e.textContent = text;
-  parent.appendChild(e);
-  return e;
-}
-const pts = (list) => list.map((p) => `${p[0].toFixed(2)},${p[1].toFixed(2)}`).join(" ");
 
 function enableDragRotate(svg, view, redraw) {
   let last = null;
@@ -107,260 +139,351 @@ function enableDragRotate(svg, view, redraw) {
 }
 
 // ---------------------------------------------------------------------------------------------
-// the scene
+// what is shown now: the scene as given (with the selected combination), or a plan frame
 
-function objectFrame(scene, poseVec) {
-  // rotation (3x3) and position (dim) of the object: the scene pose, or a plan's pose vector
-  if (scene.dim === 2) {
-    const p = poseVec ? poseVec.slice(0, 2) : scene.object.pose.position;
-    const t = poseVec ? poseVec[2] : scene.object.pose.angle || 0;
-    return { p, t };
-  }
-  const R0 = quatToMat(scene.object.pose.quat_wxyz || [1, 0, 0, 0]);
-  if (!poseVec) return { p: scene.object.pose.position, R: R0 };
-  return { p: poseVec.slice(0, 3), R: matmul(rotvecToMat(poseVec.slice(3, 6)), R0) };
+function sceneContacts() {
+  const letters = state.combination;
+  return state.geometry.contacts.map((c, i) => ({ body: c.body, point: c.point, normal: c.normal, half_angle: c.half_angle,
+    state: letters ? letters[i] || "" : "", label: String(i) }));
 }
 
-function objectOutline(scene, frame) {
-  // polylines (world points) and circles ([centre, radius]) that draw the object
-  const s = scene.object.shape, lines = [], circles = [];
-  if (scene.dim === 2) {
-    const T = (v) => add(frame.p, rot2(v, frame.t));
-    if (s.type === "disk") circles.push([frame.p, s.radius, T([s.radius, 0])]);
-    else if (s.type === "box") {
-      const [a, b] = [s.size[0] / 2, s.size[1] / 2], o = s.position || [0, 0];
-      lines.push([[-a, -b], [a, -b], [a, b], [-a, b], [-a, -b]].map((v) => T(add(v, o))));
-    } else if (s.type === "polygon") lines.push([...s.vertices, s.vertices[0]].map(T));
-    return { lines, circles };
-  }
-  const T = (v) => add(frame.p, matvec(frame.R, v));
-  const ring = (r, z, axis) => Array.from({ length: 33 }, (_, k) => {
-    const a = (2 * Math.PI * k) / 32, c = r * Math.cos(a), d = r * Math.sin(a);
-    return T(axis === "z" ? [c, d, z] : axis === "y" ? [c, z, d] : [z, c, d]);
-  });
-  if (s.type === "sphere") { lines.push(ring(s.radius, 0, "z"), ring(s.radius, 0, "y"), ring(s.radius, 0, "x")); }
-  else if (s.type === "cylinder") {
-    const h = s.height / 2;
-    lines.push(ring(s.radius, -h, "z"), ring(s.radius, h, "z"));
-    for (let k = 0; k < 4; k++) { const a = (k * Math.PI) / 2; const c = [s.radius * Math.cos(a), s.radius * Math.sin(a)]; lines.push([T([...c, -h]), T([...c, h])]); }
-  } else if (s.type === "box") {
-    const [a, b, c] = s.size.map((x) => x / 2), o = s.position || [0, 0, 0];
-    const V = [[-a, -b, -c], [a, -b, -c], [a, b, -c], [-a, b, -c], [-a, -b, c], [a, -b, c], [a, b, c], [-a, b, c]].map((v) => T(add(v, o)));
-    for (const [i, j] of [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4], [0, 4], [1, 5], [2, 6], [3, 7]]) lines.push([V[i], V[j]]);
-  } else circles.push([frame.p, 0.02, null]);
-  return { lines, circles };
-}
-
-function fixedOutline(scene, body) {
-  const s = body.shape, lines = [], circles = [];
-  if (s.type === "segment") lines.push(s.points);
-  else if (s.type === "box") {
-    const o = s.position || (scene.dim === 2 ? [0, 0] : [0, 0, 0]);
-    if (scene.dim === 2) { const [a, b] = [s.size[0] / 2, s.size[1] / 2]; lines.push([[-a, -b], [a, -b], [a, b], [-a, b], [-a, -b]].map((v) => add(v, o))); }
-    else {
-      const [a, b, c] = s.size.map((x) => x / 2);
-      const V = [[-a, -b, -c], [a, -b, -c], [a, b, -c], [-a, b, -c], [-a, -b, c], [a, -b, c], [a, b, c], [-a, b, c]].map((v) => add(v, o));
-      for (const [i, j] of [[0, 1], [1, 2], [2, 3], [3, 0], [4, 5], [5, 6], [6, 7], [7, 4], [0, 4], [1, 5], [2, 6], [3, 7]]) lines.push([V[i], V[j]]);
-    }
-  } else if (s.type === "disk" || s.type === "sphere") circles.push([scene.dim === 2 ? [0, 0] : [0, 0, 0], s.radius, null]);
-  else if (s.type === "polygon") lines.push([...s.vertices, s.vertices[0]]);
-  return { lines, circles };
-}
-
-function sceneSize(scene, geom) {
-  const P = [];
-  for (const f of geom.frames[0].fingers) for (const l of f.links) P.push(l.a, l.b);
-  for (const c of geom.contacts) P.push(c.point);
-  const o = objectOutline(scene, objectFrame(scene, null));
-  for (const l of o.lines) P.push(...l);
-  for (const [c, r] of o.circles) P.push(c.map((x) => x + r), c.map((x) => x - r));
-  for (const b of scene.fixed_bodies || []) { const fo = fixedOutline(scene, b); for (const l of fo.lines) P.push(...l); }
-  return P;
+function currentView() {
+  const f = state.frames.length ? state.frames[state.frameIndex] : null;
+  const contacts = f ? f.contacts : sceneContacts();
+  const stateOf = {};
+  for (const c of contacts) if (c.state && c.state !== "-" && !stateOf[c.body]) stateOf[c.body] = c.state;
+  return {
+    index: state.frameIndex,
+    fingers: f ? f.fingers : state.geometry.frames[0].fingers,
+    q: f ? f.q : state.geometry.frames[0].q,
+    pose: f ? f.pose : null,
+    contacts, stateOf,
+  };
 }
 
 function drawScene() {
+  if (!state.scene || !state.geometry) return;
+  if (state.scene.dim === 3) { if (state.view3d) state.view3d.update(currentView()); return; }
+  drawScene2D();
+}
+
+function outline2D(shape, T) {
+  // polylines (world) and circles [centre, radius, mark] of a 2-D shape placed by T
+  const lines = [], circles = [];
+  if (shape.type === "disk") circles.push([T([0, 0]), shape.radius, T([shape.radius, 0])]);
+  else if (shape.type === "box") {
+    const [a, b] = [shape.size[0] / 2, shape.size[1] / 2], o = shape.position || [0, 0];
+    lines.push([[-a, -b], [a, -b], [a, b], [-a, b], [-a, -b]].map((v) => T(add(v, o))));
+  } else if (shape.type === "polygon") lines.push([...shape.vertices, shape.vertices[0]].map(T));
+  else if (shape.type === "segment") lines.push(shape.points.map(T));
+  return { lines, circles };
+}
+
+function drawScene2D() {
   const svg = $("scene-view");
   svg.innerHTML = "";
-  const scene = state.scene, geom = state.geometry;
-  if (!scene || !geom) return;
+  const scene = state.scene, geom = state.geometry, view = currentView();
   const W = 600, H = 460;
-  const frameInfo = state.frames.length ? state.frames[state.frameIndex] : null;
-  const fingersNow = frameInfo ? frameInfo.fingers : geom.frames[0].fingers;
-  const objFrame = objectFrame(scene, frameInfo ? frameInfo.pose : null);
-  const P = state.extraBounds.length ? sceneSize(scene, geom).concat(state.extraBounds) : sceneSize(scene, geom);
-  const proj = makeProjector(scene.dim, state.view, P, W, H);
+  const objFrame = frameOf(scene, view.pose);
+  const objT = (v) => toWorld(scene, objFrame, v);
+  const oo = outline2D(scene.object.shape, objT);
+  const P = [];
+  for (const f of geom.frames[0].fingers) for (const l of f.links) P.push(l.a, l.b);
+  for (const c of geom.contacts) P.push(c.point);
+  for (const l of oo.lines) P.push(...l);
+  for (const [c, r] of oo.circles) P.push(add(c, [r, r]), sub(c, [r, r]));
+  for (const b of scene.fixed_bodies || []) for (const l of outline2D(b.shape, (v) => v).lines) P.push(...l);
+  P.push(...state.extraBounds);
   const size = Math.max(...P.map((p) => norm(sub(p, P[0]))), 1e-3);
   const L = 0.12 * size;
-
-  if (scene.dim === 3) { // axes
-    const o = [0, 0, 0];
-    [["x", [1, 0, 0], "#c33"], ["y", [0, 1, 0], "#3a3"], ["z", [0, 0, 1], "#33c"]].forEach(([n, v, c]) => {
-      const a = proj(o), b = proj(mul(v, L));
-      el(svg, "line", { x1: a[0], y1: a[1], x2: b[0], y2: b[1], stroke: c, "stroke-width": 1 });
-      el(svg, "text", { x: b[0] + 2, y: b[1], fill: c, "font-size": 10 }, n);
-    });
-  }
-  // which body is in which state (a selected combination, or the current plan step)
-  const stateOf = {};
-  const letters = frameInfo ? frameInfo.combination : state.combination;
-  const bodies = frameInfo ? frameInfo.contacts : scene.contacts.map((c) => c.body);
-  if (letters) bodies.forEach((b, i) => { if (letters[i]) stateOf[b] = (stateOf[b] || "") + letters[i]; });
+  // normals and labels in view (a plan's are in extraBounds, so the view stays put while it plays)
+  if (!state.frames.length) for (const c of view.contacts) if (c.normal) P.push(sub(c.point, mul(c.normal, 1.5 * L)));
+  const proj = makeProjector(2, null, P, W, H);
+  const stateOf = view.stateOf;
 
   for (const b of scene.fixed_bodies || []) {
-    const fo = fixedOutline(scene, b);
-    const fst = stateOf[b.name];
-    for (const l of fo.lines) el(svg, "polyline", { points: pts(l.map(proj)), fill: "none", stroke: fst ? COLORS[fst[0]] : "#555", "stroke-width": 4, class: "fixed" });
+    const fo = outline2D(b.shape, (v) => v), fst = stateOf[b.name];
+    for (const l of fo.lines) el(svg, "polyline", { points: pts(l.map(proj)), fill: "none", stroke: fst ? COLORS[fst] : "#555", "stroke-width": 4, class: "fixed" });
     for (const [c, r] of fo.circles) { const q = proj(c); el(svg, "circle", { cx: q[0], cy: q[1], r: r * proj.scale, fill: "#ddd", stroke: "#555" }); }
   }
-  const oo = objectOutline(scene, objFrame);
   for (const [c, r, mark] of oo.circles) {
     const q = proj(c);
     el(svg, "circle", { cx: q[0], cy: q[1], r: r * proj.scale, fill: "#a8c5e6", "fill-opacity": 0.5, stroke: "#1d3557", "stroke-width": 1.5, class: "object" });
     if (mark) { const m = proj(mark); el(svg, "line", { x1: q[0], y1: q[1], x2: m[0], y2: m[1], stroke: "#1d3557" }); }
   }
-  for (const l of oo.lines) el(svg, "polyline", { points: pts(l.map(proj)), fill: scene.dim === 2 ? "#a8c5e6" : "none", "fill-opacity": 0.5, stroke: "#1d3557", "stroke-width": 1.2, class: "object" });
-
-  for (const f of fingersNow) {
+  for (const l of oo.lines) el(svg, "polyline", { points: pts(l.map(proj)), fill: "#a8c5e6", "fill-opacity": 0.5, stroke: "#1d3557", "stroke-width": 1.2, class: "object" });
+  for (const f of view.fingers) {
     for (const l of f.links) {
-      const a = proj(l.a), b = proj(l.b);
-      const st = stateOf[l.body];
-      const color = st ? COLORS[st[0]] : "#444";
-      el(svg, "line", { x1: a[0], y1: a[1], x2: b[0], y2: b[1], stroke: color, "stroke-width": Math.max(4, 2 * l.radius * proj.scale), "stroke-linecap": "round", class: "link", "data-body": l.body });
+      const a = proj(l.a), b = proj(l.b), st = stateOf[l.body];
+      el(svg, "line", { x1: a[0], y1: a[1], x2: b[0], y2: b[1], stroke: st ? COLORS[st] : "#444", "stroke-opacity": 0.8, "stroke-width": Math.max(4, 2 * l.radius * proj.scale), "stroke-linecap": "round", class: "link", "data-body": l.body });
       el(svg, "circle", { cx: a[0], cy: a[1], r: 4, fill: "#fff", stroke: "#222" });
     }
   }
-  if (!frameInfo || state.frameIndex === 0) {
-    // a plan frame's letters name the scene's contacts when it has the same contacts, in order
-    const same = frameInfo && frameInfo.contacts.length === scene.contacts.length
-      && frameInfo.contacts.every((b, k) => b === scene.contacts[k].body);
-    const contactLetters = frameInfo ? (same ? frameInfo.combination : null) : state.combination;
-    geom.contacts.forEach((c, i) => {
-      const p = c.point, n = c.normal, q = proj(p);
-      const s = contactLetters ? contactLetters[i] || null : null;
-      const color = s ? COLORS[s] : "#e76f51";
-      // friction cone: the force directions that can act on the object at this contact
-      if (scene.dim === 2) {
+  view.contacts.forEach((c) => {
+    const p = c.point, q = proj(p), s = c.state;
+    const color = s && COLORS[s] ? COLORS[s] : "#e76f51";
+    if (c.normal) {
+      const n = c.normal;
+      if (c.half_angle > 1e-6) {  // friction cone: the force directions that can act on the object here
         const r1 = rot2(n, c.half_angle), r2 = rot2(n, -c.half_angle);
         el(svg, "polygon", { points: pts([q, proj(sub(p, mul(r1, L))), proj(sub(p, mul(r2, L)))]), fill: color, "fill-opacity": 0.18, stroke: color, "stroke-dasharray": "3 2", class: "cone" });
-      } else {
-        const [t1, t2] = perpBasis(n), tn = Math.tan(c.half_angle);
-        const ring = Array.from({ length: 13 }, (_, k) => {
-          const a = (2 * Math.PI * k) / 12;
-          const d = add(n, add(mul(t1, tn * Math.cos(a)), mul(t2, tn * Math.sin(a))));
-          return proj(sub(p, mul(d, L / norm(d))));
-        });
-        el(svg, "polyline", { points: pts(ring), fill: color, "fill-opacity": 0.15, stroke: color, class: "cone" });
-        for (const k of [0, 3, 6, 9]) el(svg, "line", { x1: q[0], y1: q[1], x2: ring[k][0], y2: ring[k][1], stroke: color, "stroke-width": 0.7 });
-      }
+      } else el(svg, "polygon", { points: pts([q, proj(sub(p, mul(n, L)))]), stroke: color, class: "cone" });
       const tail = proj(sub(p, mul(n, 1.3 * L)));
       el(svg, "line", { x1: tail[0], y1: tail[1], x2: q[0], y2: q[1], stroke: color, "stroke-width": 2, "marker-end": "url(#arrow)", class: "normal" });
-      el(svg, "circle", { cx: q[0], cy: q[1], r: 5, fill: color, stroke: "#fff", class: "contact", "data-state": s || "" });
-      el(svg, "text", { x: tail[0] + 3, y: tail[1] - 3, "font-size": 11, fill: "#222" }, `${i}${s ? ":" + s : ""}`);
-    });
-  }
+      el(svg, "text", { x: tail[0] + 3, y: tail[1] - 3, "font-size": 11, fill: "#222" }, `${c.label}${s ? ":" + s : ""}`);
+    }
+    el(svg, "circle", { cx: q[0], cy: q[1], r: 5, fill: color, stroke: "#fff", class: "contact", "data-state": s || "" });
+  });
+  // a scale bar with units
+  const bar = Math.pow(10, Math.floor(Math.log10(size * 0.3)));
+  el(svg, "line", { x1: 20, y1: H - 16, x2: 20 + bar * proj.scale, y2: H - 16, stroke: "#333", "stroke-width": 2, class: "scale-bar" });
+  el(svg, "text", { x: 20, y: H - 22, "font-size": 11, fill: "#333" }, `${formatLength(bar)} · x right, y up [m]`);
   const defs = el(svg, "defs", {});
   const m = el(defs, "marker", { id: "arrow", viewBox: "0 0 10 10", refX: 9, refY: 5, markerWidth: 6, markerHeight: 6, orient: "auto-start-reverse" });
   el(m, "path", { d: "M0,0 L10,5 L0,10 z", fill: "#333" });
 }
 
+// ---------------------------------------------------------------------------------------------
+// the scene
+
 function detachJob() {
   // the job keeps running on the server, but its result no longer belongs to what is shown
   stopPolling(); stopPlaying();
-  state.job = null; state.plan = null; state.frames = []; state.frameIndex = 0;
-  $("job-status").textContent = "no job"; delete $("job-status").dataset.status;
+  state.job = null; state.plan = null; state.frames = []; state.frameIndex = 0; state.extraBounds = [];
+  $("job-status").textContent = "no job"; delete $("job-status").dataset.status; delete $("job-status").dataset.jobId;
   $("job-progress").value = 0; $("cancel-btn").disabled = true; $("steps").innerHTML = "";
-  $("contact-states").innerHTML = ""; $("torque-bars").innerHTML = "";
+  $("contact-states").innerHTML = ""; $("torque-bars").innerHTML = ""; $("player").hidden = true;
+  delete $("player").dataset.frames; delete $("player").dataset.frame;
+  $("job-error").textContent = "";
+}
+
+function jointNames() {
+  if (state.scene && state.scene.dim === 3 && state.view3d) return state.view3d.jointNames();
+  const out = [];
+  for (const f of (state.scene ? state.scene.fingers : [])) f.q.forEach((_, k) => out.push(`${f.name}/joint ${k}`));
+  return out;
 }
 
 async function setScene(scene, label) {
   detachJob();
-  state.scene = scene; state.combination = null; state.rows = []; state.frames = []; state.plan = null;
-  state.extraBounds = [];
-  $("scene-error").textContent = ""; $("analysis-error").textContent = ""; $("job-error").textContent = "";
-  $("combo-table").querySelector("tbody").innerHTML = ""; $("report").hidden = true; $("player").hidden = true;
+  const token = ++state.sceneToken;
+  state.scene = scene; state.combination = null; state.rows = []; state.filtered = []; state.report = null;
+  $("combo-search").value = "";  // a filter of the last scene's table
+  $("scene-error").textContent = ""; $("analysis-error").textContent = "";
+  $("combo-table").querySelector("tbody").innerHTML = ""; $("report").hidden = true; $("page-info").textContent = ""; $("pager").hidden = true;
   $("analysis-status").textContent = "";
   $("scene-info").textContent = `${label}: ${scene.dim}-D, ${scene.contacts.length} contacts, ${scene.fingers.length} fingers` + (scene.description ? ` — ${scene.description}` : "");
-  $("view-hint").textContent = scene.dim === 3 ? "3-D view: drag to rotate." : "";
+  const three = scene.dim === 3;
+  $("scene-view").style.display = three ? "none" : ""; $("scene-3d").hidden = !three;
+  $("view-hint").textContent = three ? "3-D view: drag to orbit, scroll to zoom, right-drag (or shift-drag) to pan. Links and the object are translucent so every contact shows." : "";
+  document.body.dataset.sceneReady = "0";
   try {
     state.geometry = await api("POST", "/scenes/geometry", { scene });
-  } catch (e) { $("scene-error").textContent = e.message; state.geometry = null; }
+  } catch (e) { if (token === state.sceneToken) { $("scene-error").textContent = e.message; state.geometry = null; } return; }
+  if (token !== state.sceneToken) return;
+  if (three) {
+    try {
+      if (!state.view3d) state.view3d = new SceneView3D($("scene-3d"));
+      await state.view3d.load(scene, state.geometry);
+      if (token !== state.sceneToken) return;
+      if (state.view3d.errors.length) $("scene-error").textContent = "3-D view: " + state.view3d.errors.join("; ");
+    } catch (e) { $("scene-error").textContent = `3-D view unavailable (WebGL): ${e.message}`; }
+  }
   drawScene();
+  document.body.dataset.sceneReady = "1";
 }
 
 // ---------------------------------------------------------------------------------------------
-// analysis
+// analysis: the table (filter, pages) and the report of one combination
 
-function fmtVec(v) { return v ? "[" + v.map((x) => x.toFixed(2)).join(", ") + "]" : "–"; }
+function fmt(x, d = 3) { return x == null ? "–" : Math.abs(x) >= 1e4 || (x !== 0 && Math.abs(x) < 1e-3) ? x.toExponential(2) : x.toFixed(d); }
+function fmtVec(v, d = 2) { return v ? "[" + v.map((x) => (x == null ? "∞" : x.toFixed(d))).join(", ") + "]" : "–"; }
+
+function rowMatches(row, query) {
+  if (!query) return true;
+  const q = query.trim();
+  if (/^[FSDN?*]+$/i.test(q)) {  // letters: ? any one state, * any run
+    const re = new RegExp("^" + q.toUpperCase().replace(/\?/g, ".").replace(/\*/g, ".*") + "$");
+    if (re.test(row.combination)) return true;
+  }
+  const words = q.toLowerCase().split(/\s+/);
+  const text = `${row.combination} ${row.feasible ? "feasible" : "not feasible"} ${row.reason || ""}`.toLowerCase();
+  return words.every((w) => text.includes(w));
+}
+
+function applyFilter(keepPage = false) {
+  const only = $("feasible-only").checked, query = $("combo-search").value;
+  state.filtered = state.rows.filter((r) => (!only || r.feasible) && rowMatches(r, query));
+  if (!keepPage) state.page = 0;
+  renderTable();
+}
 
 function renderTable() {
   const tbody = $("combo-table").querySelector("tbody");
   tbody.innerHTML = "";
-  const only = $("feasible-only").checked;
-  for (const row of state.rows) {
-    if (only && !row.feasible) continue;
+  const pages = Math.max(1, Math.ceil(state.filtered.length / PAGE));
+  state.page = Math.max(0, Math.min(state.page, pages - 1));
+  const slice = state.filtered.slice(state.page * PAGE, (state.page + 1) * PAGE);
+  const frag = document.createDocumentFragment();
+  for (const row of slice) {
     const tr = document.createElement("tr");
     tr.dataset.combination = row.combination;
     if (row.combination === state.combination) tr.classList.add("selected");
     const letters = [...row.combination].map((s) => `<span class="${s}" style="color:#fff;padding:0 1px">${s}</span>`).join("");
-    tr.innerHTML = `<td>${letters}</td><td>${row.feasible ? "yes" : "no"}</td><td>${row.dim_dafc}</td><td>${row.dim_dpfc}</td><td>${fmtVec(row.example_direction)}</td>`;
+    const cells = [letters, row.feasible ? "yes" : "no", null, row.dim_dafc, row.dim_dpfc, fmtVec(row.example_direction)];
+    cells.forEach((c, k) => {
+      const td = document.createElement("td");
+      if (k === 0) td.innerHTML = c; else if (k === 2) { td.textContent = row.reason || ""; td.className = "reason"; } else td.textContent = String(c);
+      tr.appendChild(td);
+    });
     tr.addEventListener("click", () => selectCombination(row.combination));
-    tbody.appendChild(tr);
+    frag.appendChild(tr);
   }
+  tbody.appendChild(frag);
+  const n = state.filtered.length;
+  $("page-info").textContent = n ? `rows ${state.page * PAGE + 1}–${Math.min(n, (state.page + 1) * PAGE)} of ${n} (page ${state.page + 1} of ${pages})` : (state.rows.length ? "no row matches" : "");
+  $("page-prev").disabled = state.page === 0; $("page-next").disabled = state.page >= pages - 1;
+  $("pager").hidden = state.rows.length === 0;
 }
 
 function showRows(result) {
   state.rows = result.combinations;
-  $("analysis-status").textContent = `${result.feasible} of ${result.combinations.length} combinations feasible (${result.elapsed_seconds.toFixed(2)} s)`;
-  renderTable();
+  $("analysis-status").textContent = `${result.feasible} of ${result.combinations.length} combinations feasible` + (result.elapsed_seconds != null ? ` (${result.elapsed_seconds.toFixed(2)} s)` : "");
+  applyFilter();
 }
 
 async function runAnalysis() {
   if (!state.scene) return;
+  const scene = state.scene;
   $("analysis-error").textContent = ""; $("analysis-status").textContent = "analysing…";
   $("analyze-btn").disabled = true;
-  try { showRows(await api("POST", "/analyses", { scene: state.scene })); }
-  catch (e) { $("analysis-error").textContent = e.message; $("analysis-status").textContent = ""; }
+  try { const res = await api("POST", "/analyses", { scene }); if (state.scene === scene) showRows(res); }
+  catch (e) { if (state.scene === scene) { $("analysis-error").textContent = e.message; $("analysis-status").textContent = ""; } }
   finally { $("analyze-btn").disabled = false; }
 }
 
 async function selectCombination(c) {
-  state.combination = c; state.frames = []; renderTable(); drawScene();
-  $("report").hidden = false; $("report-title").textContent = `${c}: analysing…`; $("report-text").textContent = "";
+  const scene = state.scene;
+  if (state.plan) detachJob();  // the scene shows the combination now, not a plan frame
+  state.combination = c; state.dafcPick = null; renderTable(); drawScene();
+  $("report").hidden = false; $("report-title").textContent = `${c}: analysing…`; $("report-text").innerHTML = "";
   try {
-    const res = await api("POST", "/analyses", { scene: state.scene, combination: c });
-    const r = res.report; state.report = r;
-    $("report-title").textContent = `${c}: ${r.feasible ? "feasible" : "not feasible"} (${r.reason})`;
-    const parts = [`motion space a = ${r.a}, object part ã = ${r.a_bar}, dim DAFC ${r.dim_dafc}, dim DPFC ${r.dim_dpfc}`];
-    if (r.stationary) parts.push(`τ_st = ${fmtVec(r.stationary.tau)}`);
-    if (r.torque_set) parts.push(`recommended τ for ${fmtVec(r.torque_set.direction)}: ${fmtVec(r.torque_set.recommended)}`);
-    if (r.torque_set_error) parts.push(`torque set: ${r.torque_set_error}`);
-    $("report-text").textContent = parts.join(" · ");
+    const res = await api("POST", "/analyses", { scene, combination: c });
+    if (state.scene !== scene || state.combination !== c) return;
+    state.report = res.report;
+    $("report-title").textContent = `${c}: ${res.report.feasible ? "feasible" : "not feasible"} (${res.report.reason})`;
+    renderReport(res.report);
     drawDafc();
-  } catch (e) { $("report-title").textContent = `${c}: error`; $("report-text").textContent = e.message; }
+  } catch (e) {
+    if (state.combination !== c) return;
+    $("report-title").textContent = `${c}: error`; $("report-text").textContent = e.message;
+  }
+}
+
+function line(parent, text, cls = "line") { const p = document.createElement("div"); p.className = cls; p.textContent = text; parent.appendChild(p); return p; }
+
+function torqueTable(parent, columns) {
+  // one row per joint: name, then each column's value in N·m
+  const names = jointNames(), t = document.createElement("table");
+  t.className = "torques";
+  t.innerHTML = `<thead><tr><th>joint</th>${columns.map((c) => `<th>${c[0]} [N·m]</th>`).join("")}</tr></thead>`;
+  const tb = document.createElement("tbody");
+  names.forEach((n, j) => {
+    const tr = document.createElement("tr");
+    tr.innerHTML = `<td>${n}</td>` + columns.map((c) => `<td>${c[1] ? fmt(c[1][j]) : "–"}</td>`).join("");
+    tb.appendChild(tr);
+  });
+  t.appendChild(tb);
+  parent.appendChild(t);
+}
+
+function renderReport(r) {
+  // laid out as `ctp analyze --combination` prints it
+  const box = $("report-text"); box.innerHTML = "";
+  for (const n of r.notes || []) line(box, `note: ${n}`);
+  const ms = r.motion_space || {};
+  line(box, `motion space a = ${r.a}, object part ã = ${r.a_bar}, redundancy ${ms.redundancy ?? "–"}; p = rank(G_c Γ) = ${r.statics ? r.statics.p : "–"}`);
+  if (r.scales) line(box, `scales: force ${fmt(r.scales.force)} N, length ${fmt(r.scales.length)} m`);
+  if (r.stationary) {
+    line(box, `stationary grasp (18, most interior): margin ${fmt(r.stationary.margin)}; minimum grip: total normal ${fmt(r.stationary_min_grip ? r.stationary_min_grip.total_normal : null)}`);
+    torqueTable(box, [["τ_st most interior", r.stationary.tau], ["τ_st minimum grip", r.stationary_min_grip && r.stationary_min_grip.tau]]);
+  } else line(box, "stationary grasp (18): none");
+  if (r.dafc) {
+    const d = r.dafc, k = d.member.filter(Boolean).length;
+    line(box, `DAFC (22): dim ${d.dim}, ${k} of ${d.member.length} sampled directions, ${d.exact ? "exact" : "sampled"}; example ${fmtVec(r.example_direction)}`);
+  } else line(box, "DAFC (22): empty (the object cannot move)");
+  if (r.dpfc) {
+    const dp = r.dpfc;
+    line(box, dp.enumerated ? `DPFC (28): dim ${dp.dim}, ${dp.vertices.length} vertices, ${dp.rays.length} rays${dp.lines && dp.lines.length ? `, ${dp.lines.length} lines` : ""}`
+      : `DPFC (28): dim ${dp.dim}, too many to enumerate its vertices; ${dp.vertices.length} extreme wrenches along its axes`);
+    for (const v of dp.vertices.slice(0, 8)) line(box, `    vertex ${fmtVec(v, 3)}`);
+    for (const v of dp.rays.slice(0, 8)) line(box, `    ray    ${fmtVec(v, 3)}`);
+  }
+  if (r.torque_set) {
+    const ts = r.torque_set;
+    line(box, ts.enumerated && ts.vertices
+      ? `torque set T (32) for ${fmtVec(ts.direction)}: ${ts.vertices.length} vertices, ${ts.rays.length} rays; φ = |dq| = ${fmt(ts.phi)} (${ts.nlp_status})`
+      : `torque set T (32) for ${fmtVec(ts.direction)}: too large to enumerate; φ = |dq| = ${fmt(ts.phi)} (${ts.nlp_status})`);
+    const cols = [["recommended τ", ts.recommended]];
+    (ts.vertices || []).slice(0, 4).forEach((v, k) => cols.push([`vertex ${k}`, v]));
+    (ts.rays || []).slice(0, 3).forEach((v, k) => cols.push([`ray ${k}`, v]));
+    torqueTable(box, cols);
+    line(box, `recommended τ: work ${fmt(ts.work)}`);
+  }
+  if (r.torque_set_error) line(box, `torque set: ${r.torque_set_error}`);
+  if (r.uncertainty) line(box, `friction uncertainty ν = ${r.uncertainty.nu}: ${r.uncertainty.reason}`);
+  if (r.regrasp) line(box, `regrasp cone (33): ${r.regrasp.rays.length} rays, ${r.regrasp.lines.length} lines (${r.regrasp.exact ? "exact" : "S-points checked per generator"})`);
+  if (r.quality) line(box, `quality: wrench ball ${fmt(r.quality.wrench_ball)}${r.quality.wrench_ball_reason ? ` (${r.quality.wrench_ball_reason})` : ""}, ε = ${fmt(r.quality.epsilon)}`);
 }
 
 function drawDafc() {
-  const svg = $("dafc-view"); svg.innerHTML = "";
-  const r = state.report;
-  if (!r || !r.dafc) { el(svg, "text", { x: 20, y: 160, "font-size": 12 }, "no DAFC samples (the object cannot move)"); return; }
-  const dirs = r.dafc.directions.map((d) => d.slice(0, 3)), member = r.dafc.member;
-  const corners = [[1, 1, 1], [-1, -1, -1], [1, -1, 1], [-1, 1, -1]];
-  const proj = makeProjector(3, state.dafcView, corners, 320, 320, 20);
-  const names = state.scene.dim === 2 ? ["x", "y", "θ"] : ["x", "y", "z"];
-  [[1, 0, 0], [0, 1, 0], [0, 0, 1]].forEach((v, i) => {
-    const a = proj(mul(v, -1)), b = proj(v);
-    el(svg, "line", { x1: a[0], y1: a[1], x2: b[0], y2: b[1], stroke: "#999", "stroke-dasharray": "2 2" });
-    el(svg, "text", { x: b[0] + 3, y: b[1], "font-size": 11, fill: "#555" }, names[i]);
-  });
-  const order = dirs.map((d, i) => [proj(d)[2], i]).sort((a, b) => b[0] - a[0]);
-  for (const [, i] of order) {
-    const q = proj(dirs[i]);
-    el(svg, "circle", { cx: q[0], cy: q[1], r: member[i] ? 3.5 : 2, fill: member[i] ? "#2a9d8f" : "#bbb", class: member[i] ? "dafc-in" : "dafc-out" });
+  const T = $("dafc-trans"), R = $("dafc-rot");
+  T.innerHTML = ""; R.innerHTML = "";
+  const r = state.report, dim = state.scene.dim;
+  if (!r || !r.dafc) {
+    for (const s of [T, R]) el(s, "text", { x: 14, y: 130, "font-size": 12 }, "no DAFC (the object cannot move)");
+    $("dafc-caption").textContent = "";
+    return;
   }
-  if (r.example_direction) {
-    const q = proj(r.example_direction.slice(0, 3)), o = proj([0, 0, 0]);
-    el(svg, "line", { x1: o[0], y1: o[1], x2: q[0], y2: q[1], stroke: "#1d3557", "stroke-width": 2 });
+  const nt = dim === 2 ? 2 : 3;
+  const dirs = r.dafc.directions, member = r.dafc.member;
+  const ex = r.example_direction;
+  const panels = [
+    { svg: T, part: (d) => d.slice(0, nt), names: dim === 2 ? ["Δx [m]", "Δy [m]"] : ["Δx [m]", "Δy [m]", "Δz [m]"] },
+    { svg: R, part: (d) => d.slice(nt), names: dim === 2 ? ["|Δp| [m]", "Δθ [rad]"] : ["Δθx [rad]", "Δθy [rad]", "Δθz [rad]"] },
+  ];
+  for (const pn of panels) {
+    const svg = pn.svg, three = pn.names.length === 3;
+    // 2-D rotation panel: Δθ against the size of the translation part, so each sample is a point
+    const coords = (d) => (dim === 2 && pn.svg === R ? [norm(d.slice(0, 2)), d[2]] : pn.part(d));
+    const corners = three ? [[1, 1, 1], [-1, -1, -1], [1, -1, 1], [-1, 1, -1]] : [[-1, -1], [1, 1]];
+    const proj = makeProjector(three ? 3 : 2, state.dafcView, corners, 260, 260, 34);
+    const axes = three ? [[1, 0, 0], [0, 1, 0], [0, 0, 1]] : [[1, 0], [0, 1]];
+    axes.forEach((v, i) => {
+      const a = proj(mul(v, -1)), b = proj(v);
+      el(svg, "line", { x1: a[0], y1: a[1], x2: b[0], y2: b[1], stroke: "#999", "stroke-dasharray": "2 2" });
+      el(svg, "text", { x: b[0] + (three ? 3 : i === 0 ? -40 : 4), y: b[1] + (three || i === 1 ? 0 : 14), "font-size": 11, fill: "#444", class: "axis-label" }, pn.names[i]);
+      el(svg, "text", { x: b[0] - 4, y: b[1] + (i === 0 && !three ? -4 : 12), "font-size": 9, fill: "#888" }, "1");
+    });
+    if (ex) {  // under the samples, so it never hides one from the pointer
+      const q = proj(coords(ex)), o = proj(coords(ex).map(() => 0));
+      el(svg, "line", { x1: o[0], y1: o[1], x2: q[0], y2: q[1], stroke: "#1d3557", "stroke-width": 2, class: "example", "pointer-events": "none" });
+    }
+    const order = dirs.map((d, i) => [three ? proj(coords(d))[2] : 0, i]).sort((a, b) => b[0] - a[0]);
+    for (const [, i] of order) {
+      const q = proj(coords(dirs[i]));
+      const c = el(svg, "circle", { cx: q[0], cy: q[1], r: member[i] ? 3.5 : 2, fill: member[i] ? "#2a9d8f" : "#bbb", class: (member[i] ? "dafc-in" : "dafc-out") + (state.dafcPick === i ? " hl" : ""), "data-k": i });
+      c.addEventListener("pointerenter", () => pickDafc(i));
+    }
   }
+}
+
+function pickDafc(i) {
+  state.dafcPick = i;
+  for (const c of $("dafc-view").querySelectorAll("circle.hl")) c.classList.remove("hl");
+  for (const c of $("dafc-view").querySelectorAll(`circle[data-k='${i}']`)) c.classList.add("hl");
+  const r = state.report, d = r.dafc.directions[i], nt = state.scene.dim === 2 ? 2 : 3;
+  $("dafc-caption").textContent = `sample ${i}: translation ${fmtVec(d.slice(0, nt), 3)} m, rotation ${fmtVec(d.slice(nt), 3)} rad — ${r.dafc.member[i] ? "in DAFC" : "not in DAFC"}` + (r.dafc.work ? ` (work ${fmt(r.dafc.work[i])})` : "");
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -368,8 +491,8 @@ function drawDafc() {
 
 async function startJob(kind) {
   if (!state.scene) return;
-  $("job-error").textContent = "";
-  stopPolling();
+  detachJob();
+  drawScene();  // the scene as given again, not the last plan's frame
   const scene = state.scene;
   const body = kind === "plan" ? { scene, goal: { type: $("goal-select").value } } : { scene };
   try {
@@ -377,7 +500,7 @@ async function startJob(kind) {
     if (state.scene !== scene) return;  // the scene changed while the job was being created
     state.job = job; showJob(job); $("cancel-btn").disabled = false;
     state.pollTimer = setInterval(pollJob, 400);
-  } catch (e) { $("job-error").textContent = e.message; }
+  } catch (e) { if (state.scene === scene) $("job-error").textContent = e.message; }
 }
 
 function stopPolling() { if (state.pollTimer) clearInterval(state.pollTimer); state.pollTimer = null; }
@@ -389,31 +512,38 @@ function showJob(job) {
   $("job-status").textContent = `${job.kind} ${job.id}: ${job.status} ${pct}% — ${job.message}${t}`;
   $("job-status").dataset.status = job.status;
   $("job-status").dataset.jobId = job.id;
-  if (job.error) $("job-error").textContent = job.error;
+  if (job.error) $("job-error").textContent = `${job.kind} ${job.status}: ${job.error}`;
 }
 
 async function pollJob() {
-  if (!state.job) return;
+  if (!state.job || state.polling) return;
   const current = state.job, scene = state.scene;
   const stale = () => state.job === null || state.job.id !== current.id || state.scene !== scene;
-  let job;
-  try { job = await api("GET", current.url); } catch (e) { if (!stale()) { $("job-error").textContent = e.message; stopPolling(); } return; }
-  if (stale()) return;
-  state.job = job; showJob(job);
-  if (["succeeded", "failed", "cancelled"].includes(job.status)) {
+  state.polling = true;
+  try {
+    let job;
+    try { job = await api("GET", current.url); } catch (e) { if (!stale()) { $("job-error").textContent = e.message; stopPolling(); } return; }
+    if (stale()) return;
+    state.job = job; showJob(job);
+    if (!["succeeded", "failed", "cancelled"].includes(job.status)) return;
     stopPolling(); $("cancel-btn").disabled = true;
-    if (job.status === "succeeded") {
-      const result = await api("GET", job.result_url);
-      if (stale()) return;
-      if (job.kind === "plan") {
-        if (!result.found) {  // the job ran to its end, but found no plan: say so, not "succeeded"
-          $("job-status").textContent = `plan ${job.id}: no plan (the reason below)`;
-          $("job-status").dataset.status = "no-plan";
-        }
-        await loadPlan(result, scene);
-      } else showRows(result);
+    if (job.status !== "succeeded") {  // failed or cancelled: said so, nothing to play
+      $("job-status").textContent = `${job.kind} ${job.id}: ${job.status}` + (job.error ? " (the reason below)" : "");
+      $("player").hidden = true;
+      return;
     }
-  }
+    let result;
+    try { result = await api("GET", job.result_url); } catch (e) { if (!stale()) $("job-error").textContent = e.message; return; }
+    if (stale()) return;
+    if (job.kind === "plan") {
+      if (!result.found) {  // the job ran to its end, but found no plan: say so, not "succeeded"
+        $("job-status").textContent = `plan ${job.id}: no plan (the reason below)`;
+        $("job-status").dataset.status = "no-plan";
+        $("job-error").textContent = `no plan: ${result.reason}`;
+      }
+      await loadPlan(result, scene);
+    } else showRows(result);
+  } finally { state.polling = false; }
 }
 
 async function cancelJob() {
@@ -422,44 +552,7 @@ async function cancelJob() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// plan playback
-
-async function loadPlan(plan, scene) {
-  if (state.scene !== scene) return;
-  state.plan = plan;
-  const steps = $("steps"); steps.innerHTML = "";
-  $("player").hidden = false;
-  if (!plan.found) { $("job-error").textContent = `no plan: ${plan.reason}`; }
-  const items = [];
-  plan.steps.forEach((s, k) => {
-    const li = document.createElement("li");
-    li.textContent = `${s.kind} · ${s.combination} · ${(s.joint_path || []).length} waypoints`;
-    steps.appendChild(li);
-    (s.joint_path || []).forEach((q, j) => items.push({ step: k, q, pose: (s.object_path || [])[j] || null }));
-  });
-  // at most 2000 frames: keep every k-th waypoint and each step's last one
-  const stride = Math.max(1, Math.ceil(items.length / 2000));
-  const kept = items.filter((it, i) => i % stride === 0 || i === items.length - 1 || items[i + 1].step !== it.step);
-  state.frames = [];
-  if (kept.length) {
-    const geom = await api("POST", "/scenes/geometry", { scene, configurations: kept.map((it) => it.q) });
-    if (state.scene !== scene || state.plan !== plan) return;  // another scene or job meanwhile
-    state.frames = kept.map((it, i) => {
-      const s = plan.steps[it.step];
-      return { step: it.step, fingers: geom.frames[i].fingers, pose: it.pose, combination: s.combination,
-               contacts: contactBodies(s), torques: (s.torques && s.torques.chosen) || [] };
-    });
-  }
-  // the view fits every frame of the plan, so it does not jump while playing
-  state.extraBounds = [];
-  for (const f of state.frames) {
-    for (const fi of f.fingers) for (const l of fi.links) state.extraBounds.push(l.a, l.b);
-    if (f.pose) { const o = objectOutline(state.scene, objectFrame(state.scene, f.pose)); for (const [c, r] of o.circles) state.extraBounds.push(c.map((x) => x + r), c.map((x) => x - r)); for (const l of o.lines) state.extraBounds.push(...l); }
-  }
-  $("frame-slider").max = Math.max(0, state.frames.length - 1);
-  $("player").hidden = plan.steps.length === 0;  // nothing to play
-  setFrame(0);
-}
+// plans as animations: waypoints, frames interpolated between them, contacts tracked on the object
 
 function contactBodies(step) {
   // the bodies the combination's letters refer to (a new contact is in contacts_after only)
@@ -467,29 +560,166 @@ function contactBodies(step) {
   return after.length === (step.combination || "").length && before.length !== after.length ? after : before;
 }
 
+function interpolatePose(scene, a, b, u) {
+  if (!a || !b) return a || b || null;
+  return scene.dim === 2 ? lerp(a, b, u) : interpolatePose3(a, b, u);
+}
+
+/** The frames of a plan (without the link geometry): every waypoint of every step and enough
+ * frames between them that no joint turns by more than ~0.02 rad and the object moves little. */
+function planFrames(scene, plan) {
+  let pose = plan.start_pose || null;
+  let track = scene.contacts.map((c) => ({ body: c.body, point: c.point, normal: c.normal }));
+  const mu = {}; for (const c of scene.contacts) mu[c.body] = c.mu;
+  const steps = [];
+  const size = Math.max(1e-3, ...state.geometry.frames[0].fingers.flatMap((f) => f.links.map((l) => norm(sub(l.b, l.a)))));
+  plan.steps.forEach((s, k) => {
+    const jp = s.joint_path || [], op = s.object_path || [];
+    const poseAt = (j) => (op.length ? op[Math.min(op.length - 1, Math.round((j * (op.length - 1)) / Math.max(1, jp.length - 1)))] : pose);
+    const p0 = poseAt(0), p1 = poseAt(Math.max(0, jp.length - 1));
+    const f0 = frameOf(scene, p0), f1 = frameOf(scene, p1);
+    const after = s.contacts_after || [], pa = s.contact_points_after || [];
+    const used = new Set(), tracks = [];
+    for (const c of track) {
+      const l0 = toLocal(scene, f0, c.point);
+      const j = after.findIndex((b, i) => b === c.body && !used.has(i) && pa[i]);
+      if (j >= 0) used.add(j);
+      const l1 = j >= 0 ? toLocal(scene, f1, pa[j]) : l0;
+      tracks.push({ body: c.body, l0, l1, n: c.normal ? dirToLocal(scene, f0, c.normal) : shapeNormalLocal(scene, l0), after: j });
+    }
+    after.forEach((b, i) => {
+      if (used.has(i) || !pa[i]) return;
+      const l = toLocal(scene, f1, pa[i]);
+      tracks.push({ body: b, l0: l, l1: l, n: shapeNormalLocal(scene, l), after: i, added: true });
+    });
+    // the combination's letters, by body
+    const bodies = contactBodies(s), letterOf = new Map(), taken = new Set();
+    for (const t of tracks) {
+      const i = bodies.findIndex((b, m) => b === t.body && !taken.has(m));
+      if (i >= 0) { taken.add(i); letterOf.set(t, [s.combination[i] || "-", i]); }
+    }
+    steps.push({ step: s, k, jp, poseAt, tracks, letterOf });
+    track = after.map((b, i) => {
+      const t = tracks.find((x) => x.after === i);
+      const n = t && t.n ? dirToWorld(scene, f1, t.n) : null;
+      return { body: b, point: pa[i], normal: n };
+    });
+    pose = p1;
+  });
+  // frames between waypoints: as many as the largest joint or object move needs, at most MAX_FRAMES
+  const segs = [];
+  for (const st of steps) {
+    const n = st.jp.length;
+    for (let j = 0; j < Math.max(1, n - 1); j++) {
+      const qa = st.jp[j], qb = st.jp[Math.min(j + 1, n - 1)];
+      if (!qa) continue;
+      const pa = st.poseAt(j), pb = st.poseAt(Math.min(j + 1, n - 1));
+      let need = Math.max(...qa.map((x, i) => Math.abs(qb[i] - x)), 0) / 0.02;
+      if (pa && pb) {
+        const d = scene.dim === 2 ? 2 : 3;
+        need = Math.max(need, norm(sub(pb.slice(0, d), pa.slice(0, d))) / (0.01 * size), norm(sub(pb.slice(d), pa.slice(d))) / 0.02);
+      }
+      segs.push({ st, j, n, need: n > 1 ? Math.max(1, Math.ceil(need)) : 0 });
+    }
+  }
+  const total = segs.reduce((s, g) => s + g.need + 1, 0);
+  const shrink = total > MAX_FRAMES ? (MAX_FRAMES - segs.length) / Math.max(1, total - segs.length) : 1;
+  const frames = [];
+  for (const g of segs) {
+    const sub_ = g.need ? Math.max(1, Math.floor(g.need * shrink)) : 0;
+    const last = g.j === g.n - 2 || g.n <= 1;
+    for (let m = 0; m < (sub_ || 1) + (last && sub_ ? 1 : 0); m++) {
+      const u = sub_ ? m / sub_ : 0;
+      const qa = g.st.jp[g.j], qb = g.st.jp[Math.min(g.j + 1, g.n - 1)];
+      frames.push({ st: g.st, q: lerp(qa, qb, u), pose: interpolatePose(scene, g.st.poseAt(g.j), g.st.poseAt(Math.min(g.j + 1, g.n - 1)), u),
+                    progress: g.n > 1 ? (g.j + u) / (g.n - 1) : 1, waypoint: u === 0 ? g.j : null });
+    }
+  }
+  return frames.map((f, index) => {
+    const fr = frameOf(scene, f.pose);
+    const contacts = f.st.tracks.map((t) => {
+      const local = lerp(t.l0, t.l1, f.progress);
+      const ln = ["disk", "sphere"].includes(scene.object.shape.type) ? shapeNormalLocal(scene, local) : t.n;
+      const [letter, i] = f.st.letterOf.get(t) || ["-", null];
+      const m = mu[t.body] ?? 0;
+      return { body: t.body, point: toWorld(scene, fr, local), normal: ln ? dirToWorld(scene, fr, ln) : null,
+               half_angle: Math.atan(m), state: letter, label: i == null ? "·" : String(i) };
+    });
+    return { index, step: f.st.k, q: f.q, pose: f.pose, waypoint: f.waypoint, contacts,
+             combination: f.st.step.combination, torques: (f.st.step.torques && f.st.step.torques.chosen) || [] };
+  });
+}
+
+async function loadPlan(plan, scene) {
+  if (state.scene !== scene) return;
+  state.plan = plan;
+  const steps = $("steps"); steps.innerHTML = "";
+  $("player").hidden = false;
+  plan.steps.forEach((s, k) => {
+    const li = document.createElement("li"), b = document.createElement("button");
+    b.textContent = `${s.kind} · ${s.combination} · ${(s.joint_path || []).length} waypoints`;
+    b.title = "show this step";
+    b.addEventListener("click", () => { stopPlaying(); const i = state.frames.findIndex((f) => f.step === k); if (i >= 0) setFrame(i); });
+    li.appendChild(b);
+    steps.appendChild(li);
+  });
+  let frames = [];
+  try { frames = planFrames(scene, plan); } catch (e) { $("job-error").textContent = `plan playback: ${e.message}`; }
+  state.frames = [];
+  if (frames.length) {
+    let geom;
+    try { geom = await api("POST", "/scenes/geometry", { scene, configurations: frames.map((f) => f.q) }); }
+    catch (e) { if (state.plan === plan) $("job-error").textContent = `plan playback: ${e.message}`; return; }
+    if (state.scene !== scene || state.plan !== plan) return;  // another scene or job meanwhile
+    frames.forEach((f, i) => { f.fingers = geom.frames[i].fingers; });
+    state.frames = frames;
+  }
+  // the 2-D view fits every frame of the plan, so it does not jump while playing
+  state.extraBounds = [];
+  if (scene.dim === 2) {
+    for (const f of state.frames) for (const fi of f.fingers) for (const l of fi.links) state.extraBounds.push(l.a, l.b);
+    const all = [...state.extraBounds, ...state.geometry.contacts.map((c) => c.point)];
+    const L = 0.12 * Math.max(...all.map((p) => norm(sub(p, all[0]))), 1e-3);
+    for (const f of state.frames) for (const c of f.contacts) if (c.normal) state.extraBounds.push(sub(c.point, mul(c.normal, 1.5 * L)));
+  }
+  $("frame-slider").max = Math.max(0, state.frames.length - 1);
+  $("player").hidden = plan.steps.length === 0;  // nothing to play
+  $("player").dataset.frames = String(state.frames.length);
+  setFrame(0);
+}
+
 function setFrame(i) {
   state.frameIndex = Math.max(0, Math.min(i, state.frames.length - 1));
   $("frame-slider").value = state.frameIndex;
   const f = state.frames[state.frameIndex];
-  [...$("steps").children].forEach((li, k) => li.classList.toggle("current", f && k === f.step));
-  $("frame-label").textContent = f ? `step ${f.step + 1} of ${state.plan.steps.length}, frame ${state.frameIndex + 1}/${state.frames.length}` : "empty plan";
+  [...$("steps").children].forEach((li, k) => li.classList.toggle("current", !!f && k === f.step));
+  $("frame-label").textContent = f ? `step ${f.step} (steps 0–${state.plan.steps.length - 1}), frame ${state.frameIndex + 1}/${state.frames.length}${f.waypoint != null ? ` (waypoint ${f.waypoint})` : ""}` : "empty plan";
+  $("player").dataset.frame = String(state.frameIndex);
   const cs = $("contact-states"); cs.innerHTML = "";
-  if (f) f.contacts.forEach((b, k) => { const s = f.combination[k] || "?"; const span = document.createElement("span"); span.className = `chip ${s}`; span.textContent = `${b}: ${s}`; cs.appendChild(span); });
+  if (f) for (const c of f.contacts) { const span = document.createElement("span"); span.className = `chip ${c.state}`; span.textContent = `${c.label} ${c.body}: ${c.state}`; cs.appendChild(span); }
   drawTorques(f ? f.torques : []);
   drawScene();
 }
 
 function drawTorques(tau) {
   const svg = $("torque-bars"); svg.innerHTML = "";
-  if (!tau || !tau.length) { el(svg, "text", { x: 10, y: 70, "font-size": 12 }, "no joint torques for this step"); return; }
-  const m = Math.max(...tau.map(Math.abs), 1e-9), w = 300 / tau.length;
-  el(svg, "line", { x1: 10, y1: 70, x2: 310, y2: 70, stroke: "#999" });
+  if (!tau || !tau.length) { el(svg, "text", { x: 10, y: 90, "font-size": 12 }, "no joint torques for this step"); return; }
+  const names = jointNames(), W = 560, left = 50, right = 10, top = 18, mid = 80, hmax = 56;
+  const m = Math.max(...tau.map(Math.abs), 1e-9), w = (W - left - right) / tau.length;
+  el(svg, "line", { x1: left, y1: mid, x2: W - right, y2: mid, stroke: "#999" });
+  el(svg, "line", { x1: left, y1: mid - hmax, x2: left, y2: mid + hmax, stroke: "#999" });
+  el(svg, "text", { x: 4, y: mid - hmax + 4, "font-size": 9, fill: "#444" }, `${fmt(m, 2)}`);
+  el(svg, "text", { x: 4, y: mid + 3, "font-size": 9, fill: "#444" }, "0");
+  el(svg, "text", { x: 4, y: mid + hmax + 4, "font-size": 9, fill: "#444" }, `${fmt(-m, 2)}`);
+  el(svg, "text", { x: left, y: 12, "font-size": 10, fill: "#222" }, "chosen joint torques τ [N·m] of this step");
   tau.forEach((t, j) => {
-    const h = (Math.abs(t) / m) * 55;
-    el(svg, "rect", { x: 10 + j * w + 2, y: t >= 0 ? 70 - h : 70, width: Math.max(2, w - 4), height: h, fill: t >= 0 ? "#457b9d" : "#e76f51", class: "torque-bar" });
-    el(svg, "text", { x: 10 + j * w + 2, y: 136, "font-size": 9 }, `${j}`);
+    const h = (Math.abs(t) / m) * hmax, x = left + j * w;
+    const r = el(svg, "rect", { x: x + 1, y: t >= 0 ? mid - h : mid, width: Math.max(2, w - 2), height: Math.max(h, 0.5), fill: t >= 0 ? "#457b9d" : "#e76f51", class: "torque-bar", "data-joint": names[j] || String(j) });
+    el(r, "title", {}, `${names[j] || j}: ${fmt(t)} N·m`);
+    const lx = x + w / 2, ly = mid + hmax + 6;
+    el(svg, "text", { x: lx, y: ly, "font-size": 9, transform: `rotate(60 ${lx} ${ly})`, class: "joint-name" }, names[j] || String(j));
   });
-  el(svg, "text", { x: 200, y: 12, "font-size": 10 }, `max |τ| = ${m.toFixed(3)}`);
+  void top;
 }
 
 function stopPlaying() {
@@ -499,17 +729,19 @@ function stopPlaying() {
 
 function togglePlay() {
   if (state.playTimer) { stopPlaying(); return; }
+  if (state.frameIndex >= state.frames.length - 1) setFrame(0);
   $("play-btn").textContent = "Pause";
   state.playTimer = setInterval(() => {
-    if (state.frameIndex >= state.frames.length - 1) { togglePlay(); return; }
+    if (state.frameIndex >= state.frames.length - 1) { stopPlaying(); return; }
     setFrame(state.frameIndex + 1);
-  }, 60);
+  }, 40);
 }
 
 function stepJump(dir) {
   const f = state.frames[state.frameIndex]; if (!f) return;
-  const target = f.step + dir;
-  const i = dir > 0 ? state.frames.findIndex((x) => x.step === target) : state.frames.findIndex((x) => x.step === Math.max(0, target));
+  stopPlaying();
+  const target = Math.max(0, f.step + dir);
+  const i = state.frames.findIndex((x) => x.step === target);
   if (i >= 0) setFrame(i);
 }
 
@@ -517,17 +749,21 @@ function stepJump(dir) {
 // start-up
 
 async function init() {
-  enableDragRotate($("scene-view"), state.view, drawScene);
-  enableDragRotate($("dafc-view"), state.dafcView, drawDafc);
+  const redrawDafc = () => { if (state.report) drawDafc(); };
+  enableDragRotate($("dafc-trans"), state.dafcView, redrawDafc);
+  enableDragRotate($("dafc-rot"), state.dafcView, redrawDafc);
   $("analyze-btn").addEventListener("click", runAnalysis);
-  $("feasible-only").addEventListener("change", renderTable);
+  $("feasible-only").addEventListener("change", () => applyFilter());
+  $("combo-search").addEventListener("input", () => applyFilter());
+  $("page-prev").addEventListener("click", () => { state.page -= 1; renderTable(); });
+  $("page-next").addEventListener("click", () => { state.page += 1; renderTable(); });
   $("plan-btn").addEventListener("click", () => startJob("plan"));
   $("enum-btn").addEventListener("click", () => startJob("enumeration"));
   $("cancel-btn").addEventListener("click", cancelJob);
   $("play-btn").addEventListener("click", togglePlay);
   $("prev-btn").addEventListener("click", () => stepJump(-1));
   $("next-btn").addEventListener("click", () => stepJump(1));
-  $("frame-slider").addEventListener("input", (e) => setFrame(Number(e.target.value)));
+  $("frame-slider").addEventListener("input", (e) => { stopPlaying(); setFrame(Number(e.target.value)); });
   $("upload").addEventListener("change", async (e) => {
     const file = e.target.files[0]; if (!file) return;
     const fd = new FormData(); fd.append("file", file);
@@ -544,6 +780,8 @@ async function init() {
   sel.addEventListener("change", () => { const ex = examples.find((x) => x.file === sel.value); if (ex) setScene(ex.scene, ex.name); });
   const first = examples.find((x) => x.file === "planar_disk_envelope.json") || examples[0];
   if (first) { sel.value = first.file; await setScene(first.scene, first.name); }
+  // for the browser tests and the console: the current state and the 3-D view
+  window.ctpDashboard = { state, showRows, setFrame, view3d: () => state.view3d };
   document.body.dataset.ready = "1";
 }
 

@@ -5,6 +5,7 @@ screenshot to test-artifacts/."""
 
 from __future__ import annotations
 
+import itertools
 import shutil
 import time
 from pathlib import Path
@@ -15,8 +16,36 @@ from service_helpers import ROOT, free_port, start_server, stop_server
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARTIFACTS = ROOT / "test-artifacts"
-FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-         "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+# no GPU on a CI machine: WebGL through ANGLE on SwiftShader (software), which chromium only
+# allows when told to; never --disable-gpu, which takes WebGL away
+FLAGS = ["--headless", "--no-sandbox", "--disable-quic", "--no-first-run", "--use-angle=swiftshader",
+         "--enable-unsafe-swiftshader", "--ignore-gpu-blocklist", "--disable-background-networking",
+         "--disable-component-update", "--disable-sync"]
+
+# counts the pixels of the 3-D canvas inside the robots' screen box that differ from the
+# background, with the robots shown and hidden (the test's own reading of the canvas)
+COUNT_ROBOT_PIXELS = """() => {
+    const view = window.ctpDashboard.view3d();
+    const count = () => {
+        view.renderNow();
+        const b = view.robotScreenBox(), c = document.createElement("canvas");
+        c.width = view.canvas.width; c.height = view.canvas.height;
+        const g = c.getContext("2d");
+        g.drawImage(view.canvas, 0, 0);
+        const w = b.x1 - b.x0, h = b.y1 - b.y0, px = g.getImageData(b.x0, b.y0, w, h).data;
+        let n = 0;
+        for (let i = 0; i < px.length; i += 4) {
+            if (Math.abs(px[i] - 0xfb) + Math.abs(px[i + 1] - 0xfc) + Math.abs(px[i + 2] - 0xfd) > 24) n += 1;
+        }
+        return [n, w * h];
+    };
+    const shown = count();
+    view.setRobotsVisible(false);
+    const hidden = count();
+    view.setRobotsVisible(true);
+    view.renderNow();
+    return { shown: shown[0], hidden: hidden[0], area: shown[1], context: !!view.renderer.getContext() };
+}"""
 
 
 @pytest.mark.slow
@@ -51,18 +80,67 @@ def test_dashboard_in_chromium(tmp_path: Path) -> None:
             rows.first.click()
             expect(page.locator("#report-title")).to_contain_text("feasible", timeout=30_000)
             assert page.locator("#dafc-view circle.dafc-in").count() > 0
-            # a 3-D example is drawn too, and rotates when dragged
+            # the DAFC in two linked panels, with axis labels and units
+            assert page.locator("#dafc-trans circle").count() == page.locator("#dafc-rot circle").count() > 0
+            assert "[m]" in (page.locator("#dafc-trans").text_content() or "")
+            assert "[rad]" in (page.locator("#dafc-rot").text_content() or "")
+            page.locator("#dafc-trans circle.dafc-in").last.hover()  # the topmost of coinciding samples
+            assert page.locator("#dafc-rot circle.hl").count() == 1  # the same sample, in the other panel
+            expect(page.locator("#dafc-caption")).to_contain_text("rad")
+            # the report as the CLI prints it: stationary torques by joint name and unit, DPFC, regrasp
+            report = page.locator("#report-text").inner_text()
+            for part in ("stationary grasp (18", "left/joint 0", "[N·m]", "DPFC (28)", "regrasp cone (33)"):
+                assert part in report, (part, report)
+            # the reason column, search and paging (a table of 12,000 rows stays paged)
+            assert page.locator("#combo-table thead th").nth(2).inner_text() == "reason"
+            page.uncheck("#feasible-only")
+            n_rows = page.evaluate("window.ctpDashboard.state.rows.length")
+            expect(page.locator("#page-info")).to_contain_text(f"of {n_rows} ")
+            expect(page.locator("#combo-table tbody tr")).to_have_count(min(n_rows, 100))
+            page.fill("#combo-search", "FSFSS")
+            expect(page.locator("#combo-table tbody tr")).to_have_count(1)
+            page.fill("#combo-search", "F?FS?")  # ? = any state
+            assert 1 < page.locator("#combo-table tbody tr").count() <= 9
+            assert page.locator("#combo-table tbody tr td.reason").first.inner_text()
+            page.fill("#combo-search", "")
+            page.evaluate("""() => {
+                const letters = "FSD", rows = [];
+                for (let i = 0; i < 12000; i++) {
+                    let c = "", k = i;
+                    for (let j = 0; j < 9; j++) { c += letters[k % 3]; k = Math.floor(k / 3); }
+                    rows.push({combination: c, feasible: i % 7 === 0,
+                               reason: i % 7 ? "no stationary grasp" : "feasible",
+                               dim_dafc: 1, dim_dpfc: 2, example_direction: null});
+                }
+                window.ctpDashboard.showRows({combinations: rows, feasible: rows.filter((r) => r.feasible).length});
+            }""")
+            expect(page.locator("#combo-table tbody tr")).to_have_count(100)
+            expect(page.locator("#page-info")).to_contain_text("of 12000")
+            page.click("#page-next")
+            expect(page.locator("#page-info")).to_contain_text("rows 101–200")
+            page.fill("#combo-search", "FFFFFFFFF")
+            expect(page.locator("#combo-table tbody tr")).to_have_count(1)
+            page.check("#feasible-only")
+            # a 3-D example is drawn in WebGL, and the camera orbits when dragged
             page.select_option("#example-select", "sphere_four_finger_palm.json")
             expect(page.locator("#scene-info")).to_contain_text("3-D", timeout=30_000)
-            expect(page.locator("#scene-view line.link")).not_to_have_count(0)
-            before = page.locator("#scene-view line.link").first.get_attribute("x2")
-            box = page.locator("#scene-view").bounding_box()
+            expect(page.locator("body[data-scene-ready='1']")).to_have_count(1, timeout=60_000)
+            expect(page.locator("#scene-3d canvas")).to_be_visible()
+            expect(page.locator("#scene-view")).to_be_hidden()
+            n_contacts = page.evaluate("window.ctpDashboard.state.scene.contacts.length")
+            assert page.locator("#scene-3d").get_attribute("data-contacts") == str(n_contacts)
+            cam = "window.ctpDashboard.view3d().camera.position.toArray()"
+            before = page.evaluate(cam)
+            box = page.locator("#scene-3d canvas").bounding_box()
             assert box is not None
             page.mouse.move(box["x"] + 300, box["y"] + 200)
             page.mouse.down()
             page.mouse.move(box["x"] + 380, box["y"] + 230, steps=5)
             page.mouse.up()
-            assert page.locator("#scene-view line.link").first.get_attribute("x2") != before
+            after = page.evaluate(cam)
+            assert max(abs(a - b) for a, b in zip(after, before, strict=True)) > 1e-3, (before, after)
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.locator("#scene-3d").screenshot(path=str(ARTIFACTS / "dashboard-3d-sphere.png"))
             page.select_option("#example-select", "planar_disk_envelope.json")
             expect(page.locator("#scene-info")).to_contain_text("2-D", timeout=30_000)
             page.click("#analyze-btn")
@@ -73,6 +151,7 @@ def test_dashboard_in_chromium(tmp_path: Path) -> None:
             page.select_option("#goal-select", "active")
             page.click("#plan-btn")
             expect(page.locator("#job-status[data-status='succeeded']")).to_have_count(1, timeout=180_000)
+            expect(page.locator("#player[data-frames]")).to_have_count(1, timeout=60_000)  # its frames loaded
             expect(page.locator("#player")).to_be_visible()
             assert page.locator("#steps li").count() > 0  # the planar grasp has a plan to active closure
             # the job id is shown in full, and the API knows it by what is shown
@@ -83,9 +162,39 @@ def test_dashboard_in_chromium(tmp_path: Path) -> None:
             chips = [t.rsplit(": ", 1)[1] for t in page.locator("#contact-states .chip").all_inner_texts()]
             marks = [m.get_attribute("data-state") for m in page.locator("#scene-view circle.contact").all()]
             assert marks == chips, (marks, chips)
+            # the plan as an animation: frames between the waypoints, no jumps, contacts in every frame
+            frames = page.evaluate("""() => window.ctpDashboard.state.frames.map((f) => ({
+                step: f.step, links: f.fingers.flatMap((fi) => fi.links.flatMap((l) => [...l.a, ...l.b])),
+                contacts: f.contacts.map((c) => [c.state, c.normal !== null, ...c.point]) }))""")
+            waypoints = page.evaluate(
+                "window.ctpDashboard.state.plan.steps.reduce((s, x) => s + x.joint_path.length, 0)")
+            assert len(frames) > waypoints, (len(frames), waypoints)
+            assert all(f["contacts"] and all(c[1] for c in f["contacts"]) for f in frames)
+            jumps = [max(abs(a - b) for a, b in zip(f["links"], g["links"], strict=True))
+                     for f, g in itertools.pairwise(frames)]
+            assert max(jumps) < 0.05, max(jumps)  # metres per frame, on a scene a metre across
+            svg0 = page.locator("#scene-view").inner_html()
+            page.screenshot(path=str(ARTIFACTS / "dashboard-plan-frame0.png"), full_page=True)
             page.click("#play-btn")
-            page.wait_for_timeout(500)
+            page.wait_for_timeout(800)
             assert page.locator("#torque-bars rect.torque-bar").count() > 0
+            names = page.locator("#torque-bars text.joint-name").all_text_contents()
+            assert names[:2] == ["left/joint 0", "left/joint 1"], names
+            playing = int(page.locator("#player").get_attribute("data-frame") or 0)
+            assert playing > 0
+            assert page.locator("#scene-view").inner_html() != svg0
+            # colours of the current frame: the markers carry the frame's states, as the chips do
+            chips = [t.rsplit(": ", 1)[1] for t in page.locator("#contact-states .chip").all_inner_texts()]
+            marks = [m.get_attribute("data-state") for m in page.locator("#scene-view circle.contact").all()]
+            assert marks == chips and len(marks) > 0, (marks, chips)
+            page.screenshot(path=str(ARTIFACTS / "dashboard-plan-playing.png"), full_page=True)
+            page.click("#play-btn")  # pause
+            # the step list is clickable: the last step is shown
+            n_steps = page.locator("#steps li").count()
+            page.locator("#steps li button").last.click()
+            expect(page.locator("#steps li.current")).to_have_count(1)
+            assert page.locator("#steps li").nth(n_steps - 1).get_attribute("class") == "current"
+            expect(page.locator("#frame-label")).to_contain_text(f"step {n_steps - 1} ")
             # an enumeration job, watched the same way
             page.click("#enum-btn")
             expect(page.locator("#job-status")).to_contain_text("enumeration", timeout=30_000)
@@ -174,14 +283,67 @@ def test_docs_offline_and_job_state(tmp_path: Path) -> None:
             assert page.locator("#steps li").count() == 0
             expect(page.locator("#job-status")).to_have_text("no job")
             page.screenshot(path=str(ARTIFACTS / "dashboard-scene-switch.png"), full_page=True)
-            # the Allegro grasp has no plan to active closure: the job succeeds, the page says "no plan"
+            # the Allegro hand in WebGL with its real meshes, served by this server (nothing else reachable)
             page.select_option("#example-select", "allegro_right_box.json")
             expect(page.locator("#scene-info")).to_contain_text("3-D", timeout=30_000)
+            expect(page.locator("body[data-scene-ready='1']")).to_have_count(1, timeout=120_000)
+            assert page.locator("#scene-3d").get_attribute("data-robots") == "1"
+            assert int(page.locator("#scene-3d").get_attribute("data-meshes") or 0) >= 16
+            assert page.locator("#scene-error").inner_text() == ""
+            # the meshes sit where /scenes/geometry puts the links (urdf-loader's and pinocchio's kinematics)
+            gap = page.evaluate("""() => {
+                const o = window.ctpDashboard.view3d().linkOrigins(), g = window.ctpDashboard.state.geometry;
+                let worst = 0, n = 0;
+                for (const f of g.frames[0].fingers) for (const l of f.links) {
+                    if (!o[l.body]) continue;
+                    n += 1;
+                    worst = Math.max(worst, Math.hypot(...o[l.body].map((x, i) => x - l.a[i])));
+                }
+                return [worst, n];
+            }""")
+            assert gap[1] >= 8 and gap[0] < 1e-4, gap
+            px = page.evaluate(COUNT_ROBOT_PIXELS)
+            assert px["context"], px
+            assert px["shown"] > 0.05 * px["area"] and px["shown"] > px["hidden"] + 0.03 * px["area"], px
+            page.locator("#scene-3d").screenshot(path=str(ARTIFACTS / "dashboard-3d-allegro.png"))
+            # a frame of another configuration (as a plan's animation shows it): the meshes move to where
+            # /scenes/geometry puts the links for that configuration, and the picture changes
+            moved = page.evaluate("""async () => {
+                const d = window.ctpDashboard, view = d.view3d(), scene = d.state.scene;
+                const q = d.state.geometry.frames[0].q.map((x, i) => (i < 4 ? x - 0.4 : x));
+                const r = await fetch("/scenes/geometry", {
+                    method: "POST", headers: {"content-type": "application/json"},
+                    body: JSON.stringify({scene, configurations: [q]})});
+                const g = await r.json();
+                const grab = () => { view.renderNow(); return view.canvas.toDataURL(); };
+                const before = grab();
+                view.update({index: 1, fingers: g.frames[0].fingers, q, pose: null, contacts: [], stateOf: {}});
+                const after = grab(), o = view.linkOrigins();
+                let worst = 0, n = 0;
+                for (const f of g.frames[0].fingers) for (const l of f.links) {
+                    if (!o[l.body]) continue;
+                    n += 1;
+                    worst = Math.max(worst, Math.hypot(...o[l.body].map((x, i) => x - l.a[i])));
+                }
+                return {worst, n, differs: before !== after};
+            }""")
+            assert moved["differs"] and moved["n"] >= 8 and moved["worst"] < 1e-4, moved
+            page.select_option("#example-select", "planar_disk_envelope.json")
+            page.select_option("#example-select", "allegro_right_box.json")
+            expect(page.locator("body[data-scene-ready='1']")).to_have_count(1, timeout=120_000)
+            # the Allegro grasp has no plan to active closure: the job succeeds, the page says "no plan"
             page.click("#plan-btn")
             expect(page.locator("#job-status[data-status='no-plan']")).to_have_count(1, timeout=300_000)
             status_text = page.locator("#job-status").inner_text()
             assert "no plan" in status_text and "succeeded" not in status_text, status_text
             page.screenshot(path=str(ARTIFACTS / "dashboard-no-plan.png"), full_page=True)
+            # a cancelled job reads "cancelled", with nothing to play
+            page.click("#plan-btn")
+            expect(page.locator("#cancel-btn")).to_be_enabled(timeout=30_000)
+            page.click("#cancel-btn")
+            expect(page.locator("#job-status[data-status='cancelled']")).to_have_count(1, timeout=60_000)
+            assert "cancelled" in page.locator("#job-status").inner_text()
+            expect(page.locator("#player")).to_be_hidden()
             assert not errors, errors
             assert not blocked, blocked
             ctx.close()

@@ -15,8 +15,10 @@ from ctp.plot import STATE_COLOURS, draw_scene
 
 
 def test_state_colours_match_the_dashboard() -> None:
-    js = (ROOT / "api" / "static" / "app.js").read_text()
-    m = re.search(r"const COLORS = (\{[^}]*\});", js)
+    js = "\n".join(p.read_text() for p in sorted((ROOT / "api" / "static").glob("*.js")))
+    found = re.findall(r"(?:export )?const COLORS = (\{[^}]*\});", js)
+    assert len(found) == 1, "the dashboard defines its state colours once"
+    m = re.search(r"(\{[^}]*\})", found[0])
     assert m is not None
     dashboard = json.loads(re.sub(r"(\w+):", r'"\1":', m.group(1)))
     assert dashboard == STATE_COLOURS
