@@ -23,6 +23,7 @@ RUN pip install . \
 USER ctp
 ENV CTP_DATABASE_URL=sqlite:////data/ctp-jobs.db \
     CTP_EXAMPLES_DIR=/app/examples \
+    CTP_DATA_DIR=/data/ctp-data \
     CTP_ANALYSIS_WORKERS=2 \
     CTP_JOB_WORKERS=1
 VOLUME ["/data"]

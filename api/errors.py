@@ -176,26 +176,39 @@ def install(app: FastAPI) -> None:
         return task_error_response(exc)
 
 
+#: Requests whose body has a limit of its own: (method, path) -> the setting that holds it.
+OWN_BODY_LIMITS = {("POST", "/robots"): "max_robot_archive_bytes"}
+
+
 class BodySizeLimit:
     """ASGI middleware: a request body over ``limit`` bytes gets 413 (by its Content-Length, or
-    while it streams in when it is chunked)."""
+    while it streams in when it is chunked). The requests of :data:`OWN_BODY_LIMITS` (robot
+    archives) have the limit of their setting instead."""
 
     def __init__(self, app: Any, limit: int):
         self.app = app
         self.limit = limit
 
+    def _limit_of(self, scope: Any) -> tuple[int, str]:
+        setting = OWN_BODY_LIMITS.get((scope.get("method", ""), scope.get("path", "")))
+        settings = getattr(getattr(scope.get("app"), "state", None), "settings", None)
+        if setting is not None and settings is not None:
+            return int(getattr(settings, setting)), setting
+        return self.limit, "max_body_bytes"
+
     async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
         if scope["type"] != "http":
             await self.app(scope, receive, send)
             return
+        limit, setting = self._limit_of(scope)
         for name, value in scope.get("headers", []):
             if name == b"content-length":
                 try:
                     size = int(value)
                 except ValueError:
                     size = -1
-                if size > self.limit or size < 0:
-                    await self._reject(send)
+                if size > limit or size < 0:
+                    await self._reject(send, limit, setting)
                     return
         seen = 0
         started = False
@@ -205,8 +218,8 @@ class BodySizeLimit:
             msg = await receive()
             if msg["type"] == "http.request":
                 seen += len(msg.get("body", b""))
-                if seen > self.limit:
-                    raise _TooLarge(self.limit)
+                if seen > limit:
+                    raise _TooLarge(limit, setting)
             return msg
 
         async def tracking_send(msg: Any) -> None:
@@ -219,19 +232,19 @@ class BodySizeLimit:
             await self.app(scope, limited_receive, tracking_send)
         except _TooLarge:
             if not started:
-                await self._reject(send)
+                await self._reject(send, limit, setting)
 
-    async def _reject(self, send: Any) -> None:
+    async def _reject(self, send: Any, limit: int, setting: str) -> None:
         import json
 
-        body = json.dumps(_body(f"request body too large: the limit is {self.limit} bytes (max_body_bytes)",
-                                limit=self.limit)).encode()
+        body = json.dumps(_body(f"request body too large: the limit is {limit} bytes ({setting})",
+                                limit=limit)).encode()
         await send({"type": "http.response.start", "status": 413,
                     "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode())]})
         await send({"type": "http.response.body", "body": body})
 
 
 class _TooLarge(HTTPException):
-    def __init__(self, limit: int):
-        super().__init__(413, f"request body too large: the limit is {limit} bytes (max_body_bytes)")
+    def __init__(self, limit: int, setting: str = "max_body_bytes"):
+        super().__init__(413, f"request body too large: the limit is {limit} bytes ({setting})")
         self.limit = limit

@@ -1,14 +1,17 @@
 """Two lanes of analysis workers, so that a light request never waits behind heavy ones.
 
-* The heavy lane (``analysis_workers``, CPU priority lowered by ``HEAVY_NICE``) runs what may
-  take seconds: the table of every combination of a scene (``POST /analyses`` without a
-  combination), one combination of a very large scene, the geometry of many configurations.
-  Jobs (plans, enumerations) run at the same lower priority in their own pool.
-* The light lane (``light_workers``) runs what is cheap by construction: one combination's
-  report of a scene of ordinary size, the drawing geometry of a few configurations. A light
-  request takes an idle light worker, else an idle heavy worker (lent for one request), else
-  waits for the next light worker: two heavy requests occupying the heavy lane leave the light
-  lane free, and on a busy machine the light workers get the CPU first.
+* The heavy lane (``analysis_workers``, at the lowest CPU priority: ``nice`` 19 and Linux's
+  ``SCHED_IDLE``, api/workers.py) runs what may take seconds: the table of every combination of
+  a scene (``POST /analyses`` without a combination), one combination of a very large scene, the
+  geometry of many configurations. Jobs (plans, enumerations) run at the same priority in their
+  own pool.
+* The light lane (``light_workers``, normal priority) runs what is cheap by construction: one
+  combination's report of a scene of ordinary size, the drawing geometry of a few
+  configurations, contact detection. Light requests queue for a light worker in their order of
+  arrival (first come, first served, which keeps the tail of their latencies short), never for a
+  heavy one: a heavy worker runs on CPU time no light worker wants, so a light request lent to it
+  would wait for the whole light lane to fall idle. Two heavy requests occupying the heavy lane
+  leave the light lane free and take almost none of its CPU.
 
 :func:`analysis_lane` and :func:`geometry_lane` are the cost estimates: which lane a request goes
 to. The lane that served a request is in its ``X-Lane`` header.
@@ -19,10 +22,11 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Literal
 
-from api.workers import ProcessPool
+from api.workers import LOWEST_NICE, ProcessPool
 
-#: ``nice`` increment of the heavy lane's and the jobs' worker processes.
-HEAVY_NICE = 10
+#: ``nice`` increment of the heavy lane's and the jobs' worker processes: the lowest priority, at
+#: which they also take ``SCHED_IDLE`` (api/workers.py ``lower_priority``).
+HEAVY_NICE = LOWEST_NICE
 #: One combination of a scene up to this size is light (a handful of LPs and one small NLP:
 #: milliseconds to a fraction of a second).
 LIGHT_MAX_CONTACTS = 12
@@ -49,13 +53,6 @@ def geometry_lane(configurations: int, finger_joints: Sequence[int]) -> Lane:
 
 async def run_in_lane(lane: Lane, light: ProcessPool, heavy: ProcessPool, kind: str, payload: dict[str, Any],
                       *, timeout: float) -> dict[str, Any]:
-    """Run ``kind`` in ``lane`` (see the module docstring for how a light request finds a worker)."""
-    if lane == "heavy":
-        return await heavy.run(kind, payload, timeout=timeout)
-    w = light.take_idle()
-    if w is not None:
-        return await light.run(kind, payload, timeout=timeout, worker=w)
-    w = heavy.take_idle()
-    if w is not None:
-        return await heavy.run(kind, payload, timeout=timeout, worker=w)
-    return await light.run(kind, payload, timeout=timeout)
+    """Run ``kind`` on the next free worker of ``lane`` (see the module docstring)."""
+    pool = heavy if lane == "heavy" else light
+    return await pool.run(kind, payload, timeout=timeout)

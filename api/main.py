@@ -25,7 +25,7 @@ from api.cache import RepeatedBodies, ResultCache
 from api.http_methods import AllowedMethods
 from api.jobs import JobRunner
 from api.lanes import HEAVY_NICE
-from api.routes import analyses, enumerations, health, plans, scenes
+from api.routes import analyses, enumerations, health, plans, robot_files, robots, scenes
 from api.schemas import ErrorBody
 from api.settings import Settings, get_settings
 from api.store import JobStore
@@ -90,6 +90,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     errors.install(app)
     for r in (analyses.router, plans.router, enumerations.router, scenes.router, health.router):
         app.include_router(r)
+    app.include_router(robot_files.router)  # URDFs and meshes for the 3-D view
+    app.include_router(robots.router_for(settings))  # POST /robots: uploaded URDFs (exports CTP_DATA_DIR)
     app.add_middleware(errors.BodySizeLimit, limit=settings.max_body_bytes)
     app.add_middleware(AllowedMethods)
     app.add_middleware(RepeatedBodies, path="/analyses", limit=settings.max_body_bytes)  # outermost

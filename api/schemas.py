@@ -15,17 +15,24 @@ JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
 
 
 def _check_files(scene: Any) -> Any:
-    """A scene sent over HTTP may name URDF files only inside the installed example-robot-data
-    package (``example-robot-data:...``): a request must not read arbitrary server files."""
+    """A scene sent over HTTP may name URDF and mesh files only inside the installed
+    example-robot-data package (``example-robot-data:...``) or an uploaded robot
+    (``robot:<sha256>/...``, ``POST /robots``): a request must not read arbitrary server files."""
     if isinstance(scene, dict):
         for i, f in enumerate(scene.get("fingers") or []):
             if isinstance(f, dict) and isinstance(f.get("urdf"), dict):
                 file = f["urdf"].get("file")
-                if isinstance(file, str) and (not file.startswith("example-robot-data:") or ".." in file):
+                if isinstance(file, str) and (not file.startswith(("example-robot-data:", "robot:"))
+                                              or ".." in file):
                     raise ValueError(f"fingers.{i}.urdf.file: over HTTP a URDF must be "
-                                     f"'example-robot-data:<path>' (got '{file}')")
+                                     f"'example-robot-data:<path>' or 'robot:<sha256>/<path>' (got '{file}')")
                 if f["urdf"].get("package_dirs"):
                     raise ValueError(f"fingers.{i}.urdf.package_dirs: not accepted over HTTP")
+        shape = (scene.get("object") or {}).get("shape") if isinstance(scene.get("object"), dict) else None
+        file = shape.get("file") if isinstance(shape, dict) else None
+        if isinstance(file, str) and (not file.startswith(("example-robot-data:", "robot:")) or ".." in file):
+            raise ValueError("object.shape.file: over HTTP a mesh must be 'example-robot-data:<path>' or "
+                             f"'robot:<sha256>/<path>' (got '{file}')")
     return scene
 
 
@@ -38,6 +45,10 @@ class _In(BaseModel):
         return _check_files(v)
 
 
+#: Bounds of ``AnalysisCreate.samples``.
+MIN_SAMPLES, MAX_SAMPLES = 8, 720
+
+
 class AnalysisCreate(_In):
     """``combination`` given: the full report of that combination (``direction`` picks the motion
     for the torque set, ``nu`` adds the friction-uncertainty check). Otherwise: every combination."""
@@ -47,6 +58,10 @@ class AnalysisCreate(_In):
     combination: Annotated[str, Field(min_length=1, max_length=1024, pattern=r"^[FNSDfnsd]+$")] | None = None
     direction: Annotated[list[FiniteFloat], Field(min_length=3, max_length=6)] | None = None
     nu: Annotated[float, Field(ge=0, le=1, allow_inf_nan=False)] | None = None
+    samples: Annotated[int, Field(ge=MIN_SAMPLES, le=MAX_SAMPLES)] | None = Field(
+        None, description="with combination: directions of the motion space the DAFC set samples (then refined "
+                          "near its boundary). Default: 120 up to a 3-dimensional motion space, 48 beyond; fewer "
+                          "answer faster with a coarser DAFC set (a quick report)")
 
 
 class AnalysisPublic(BaseModel):

@@ -57,6 +57,16 @@ class Settings(BaseSettings):
     #: Longest pause between the job runner's retries of a store write (heartbeat, progress, a
     #: job's final state) while the store is unavailable; the pauses double up to it from 0.2 s.
     store_retry_max_seconds: Annotated[float, Field(gt=0, le=300)] = 5.0
+    #: The service's data folder (env ``CTP_DATA_DIR``): uploaded robots are kept in its
+    #: ``robots/<sha256>/`` folders. The app exports it as ``CTP_DATA_DIR`` to its own process
+    #: and its workers, where the analysis resolves ``urdf.file = "robot:<sha256>/<path>"``
+    #: (analysis/urdf.py ``resolve_urdf_path``; same default, relative to the working directory).
+    data_dir: Path = Path("ctp-data")
+    #: Largest robot archive ``POST /robots`` accepts (bytes, the request body).
+    max_robot_archive_bytes: Annotated[int, Field(ge=1024)] = 64_000_000
+    #: Most bytes the files of one robot archive may take once unpacked, and most files in it.
+    max_robot_unpacked_bytes: Annotated[int, Field(ge=1024)] = 256_000_000
+    max_robot_files: Annotated[int, Field(ge=1, le=100_000)] = 2_000
     #: Scenes listed by ``GET /scenes/examples``.
     examples_dir: Path = PROJECT_DIR / "examples"
     #: Start the job runner with the app (tests of the API alone may turn it off).

@@ -9,7 +9,10 @@ about 1.5 s to import) loads on a worker's first plan, so the analysis pool rest
 
 from __future__ import annotations
 
+import hashlib
+import json
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from typing import Any
 
@@ -28,9 +31,27 @@ Progress = Callable[[float, str], None]
 KINDS = ("analysis", "enumeration", "plan")
 
 
+#: Scenes whose grasp system a worker keeps (the light requests of one user are mostly other
+#: combinations of the same scene: its validation and kinematics are done once).
+SYSTEMS_KEPT = 4
+_systems: OrderedDict[str, tuple[Any, Any]] = OrderedDict()
+
+
 def _system(payload: dict[str, Any]) -> tuple[Any, Any]:
+    """The scene and its grasp system, from this worker's last :data:`SYSTEMS_KEPT` scenes when
+    it saw this one (by the SHA-256 of its canonical JSON; the analysis does not change a
+    system). A scene that fails validation is never kept."""
+    key = hashlib.sha256(json.dumps(payload["scene"], sort_keys=True, separators=(",", ":")).encode()).hexdigest()
+    kept = _systems.get(key)
+    if kept is not None:
+        _systems.move_to_end(key)
+        return kept
     scene = scene_from_dict(payload["scene"])
-    return scene, build_system(scene)
+    kept = scene, build_system(scene)
+    _systems[key] = kept
+    while len(_systems) > SYSTEMS_KEPT:
+        _systems.popitem(last=False)
+    return kept
 
 
 def run_analysis(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
@@ -41,7 +62,7 @@ def run_analysis(payload: dict[str, Any], progress: Progress | None = None) -> d
         direction = payload.get("direction")
         rep = analyze_combination(system, payload["combination"],
                                   direction=None if direction is None else np.asarray(direction, dtype=float),
-                                  nu=payload.get("nu"))
+                                  nu=payload.get("nu"), samples=payload.get("samples"))
         return {"scene": scene.name, "dim": scene.dim, "kind": "combination", "report": rep.to_json(),
                 "elapsed_seconds": time.perf_counter() - t0}
     return run_enumeration(payload, progress)

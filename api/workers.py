@@ -6,7 +6,7 @@ overruns its time limit, or is cancelled, gets its process terminated and replac
 solve cannot hold the server. The event loop watches the pipes with ``add_reader`` (no thread
 per waiting request). A worker dies with its server, even one killed with SIGKILL
 (:func:`die_with_parent`), so no orphan keeps computing; a pool may run its workers at a lower
-CPU priority (``nice``, api/lanes.py).
+CPU priority (``nice``, down to ``SCHED_IDLE``: :func:`lower_priority`, api/lanes.py).
 """
 
 from __future__ import annotations
@@ -103,14 +103,34 @@ def die_with_parent(parent_pid: int) -> None:  # pragma: no cover - runs in the 
     threading.Thread(target=watch, name="ctp-parent-watchdog", daemon=True).start()
 
 
+#: The lowest ``nice`` value, at which a worker also asks for Linux's ``SCHED_IDLE`` policy.
+LOWEST_NICE = 19
+
+
+def lower_priority(nice: int) -> str:  # pragma: no cover - runs in the child process
+    """Lower this process's CPU priority by ``nice``; at :data:`LOWEST_NICE` also take the
+    ``SCHED_IDLE`` policy where there is one (Linux), under which the process runs only on CPU
+    time no normal process wants (weight 3 against a normal process's 1,024; nice 19 alone still
+    takes 1.5 % of a core beside each busy one). Unprivileged processes may lower but not raise
+    their priority, so a worker keeps it for its lifetime. Returns the policy taken."""
+    with contextlib.suppress(OSError):
+        os.nice(nice)
+    if nice >= LOWEST_NICE and hasattr(os, "SCHED_IDLE"):
+        try:
+            os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+        except OSError:
+            return f"nice {nice}"
+        return "SCHED_IDLE"
+    return f"nice {nice}"
+
+
 def _worker_main(conn: Connection, parent_pid: int | None = None,
                  nice: int = 0) -> None:  # pragma: no cover - runs in the child process
     if parent_pid is not None:
         die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the server, which stops us
     if nice:
-        with contextlib.suppress(OSError):
-            os.nice(nice)  # a background lane: the light requests' workers get the CPU first
+        lower_priority(nice)  # a background lane: the light requests' workers get the CPU first
     from api.tasks import run_task  # loads the analysis before the worker says it is ready
 
     conn.send(("ready",))
@@ -227,12 +247,6 @@ class ProcessPool:
         """The worker processes' ids (fault-injection tests, diagnostics)."""
         return [w.proc.pid for w in self._all if w.proc.pid is not None]
 
-    def take_idle(self) -> _Worker | None:
-        """An idle worker now, or None (never waits): for :meth:`run` ``worker=``."""
-        if self._idle is None or self._idle.empty():
-            return None
-        return self._idle.get_nowait()
-
     async def _replace(self, w: _Worker) -> None:
         self._all.discard(w)
         await asyncio.to_thread(w.stop, True)
@@ -243,19 +257,16 @@ class ProcessPool:
 
     async def run(self, kind: str, payload: dict[str, Any], *, timeout: float,
                   on_progress: ProgressCallback | None = None,
-                  cancelled: asyncio.Event | None = None, worker: _Worker | None = None) -> dict[str, Any]:
+                  cancelled: asyncio.Event | None = None) -> dict[str, Any]:
         """Run a task; TaskTimeout after ``timeout`` s of work (the wait for a free worker counts
         too, so a request never outlives its limit), TaskCancelled when ``cancelled`` is set.
-        ``worker``: one taken with :meth:`take_idle` (it goes back to this pool afterwards)."""
+        Waiting tasks get the next free worker in their order of arrival."""
         assert self._idle is not None, "pool not started"
         deadline = time.monotonic() + timeout
-        if worker is not None:
-            w = worker
-        else:
-            try:
-                w = await asyncio.wait_for(self._idle.get(), timeout=timeout)
-            except TimeoutError:
-                raise TaskTimeout(timeout) from None
+        try:
+            w = await asyncio.wait_for(self._idle.get(), timeout=timeout)
+        except TimeoutError:
+            raise TaskTimeout(timeout) from None
         healthy = False  # a timeout, a cancellation or a dead worker: the process is replaced
         try:
             result = await self._talk(w, kind, payload, deadline, timeout, on_progress, cancelled)

@@ -18,16 +18,21 @@ stops it. Every request loop is bounded (a fixed number of requests, a time-out 
 * ``cached`` (issue 13, the content-addressed cache): C clients x R requests that each repeat one
   of 20 analyses made before. Target: p95 under 20 ms.
 
-Each scenario sends its own scene name, so none is answered from another's cache. An answer is an
-error when it is neither 200 nor a 422 in which the analysis says no (one combination of the
-planar scene is refused by cdd as numerically inconsistent: the answer, not a fault); the heavy
+``--samples N`` makes the light requests quick reports (``samples``: N DAFC directions instead of
+the server's 120), as a dashboard that wants an answer while the user clicks may ask. Each
+scenario prints how busy the machine was meanwhile and how much of it was other processes (the
+figures are only comparable on a quiet machine: on 2 cores every other busy process takes CPU
+from the light workers). Each scenario sends its own scene name, so none is answered from
+another's cache. An answer is an error when it is neither 200 nor a 422 in which the analysis
+says no (one combination of the planar scene is refused by cdd as numerically inconsistent: the
+answer, not a fault); the heavy
 requests' own errors (a table stopped at ``request_time_limit`` while the light ones had the CPU)
 are listed but are not a target. The clients are a minimal keep-alive HTTP client (``Client``),
 so that the load generator does not take the CPU it measures. The exit code is 1 when a scenario
 misses its target.
 
     .venv/bin/python benchmarks/service.py [--scenario all|report|mixed|mixed-repeat|cached] [--clients 20]
-        [--requests-per-client 10] [--workers 2] [--light-workers 2] [--requests 200] [--table]
+        [--requests-per-client 10] [--workers 2] [--light-workers 2] [--requests 200] [--table] [--samples N]
 """
 
 from __future__ import annotations
@@ -93,6 +98,62 @@ def light_workers_cpu(server_pid: int) -> float:
         except (OSError, ValueError, IndexError):
             continue
     return total
+
+
+def tree_cpu_seconds(root: int) -> float:
+    """User + system CPU seconds of a process and its descendants (Linux /proc): the live ones'
+    own, plus what the ended children the process has reaped spent (workers replaced after a
+    time limit)."""
+    parent: dict[int, int] = {}
+    cpu: dict[int, float] = {}
+    reaped = 0.0
+    tick = os.sysconf("SC_CLK_TCK")
+    for entry in os.listdir("/proc") if Path("/proc").is_dir() else []:
+        if not entry.isdigit():
+            continue
+        try:
+            fields = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        parent[int(entry)] = int(fields[1])
+        cpu[int(entry)] = (int(fields[11]) + int(fields[12])) / tick
+        if int(entry) == root:
+            reaped = (int(fields[13]) + int(fields[14])) / tick
+    total = reaped
+    for pid, c in cpu.items():
+        p = pid
+        while p > 1 and p != root:
+            p = parent.get(p, 0)
+        total += c if p == root else 0.0
+    return total
+
+
+def machine_busy_seconds() -> float:
+    """CPU seconds the whole machine spent busy (not idle nor waiting for I/O), all cores."""
+    try:
+        values = [int(v) for v in Path("/proc/stat").read_text().splitlines()[0].split()[1:]]
+    except (OSError, ValueError):
+        return 0.0
+    return (sum(values[:8]) - values[3] - values[4]) / os.sysconf("SC_CLK_TCK")
+
+
+class Load:
+    """How busy the machine was during a scenario, and how much of it was not this benchmark
+    (the server and its workers, and this process: the clients)."""
+
+    def __init__(self, server_pid: int):
+        self.server_pid = server_pid
+        self.t0 = time.perf_counter()
+        self.busy0 = machine_busy_seconds()
+        self.ours0 = tree_cpu_seconds(server_pid) + sum(os.times()[:2])
+
+    def line(self) -> str:
+        wall = time.perf_counter() - self.t0
+        busy = machine_busy_seconds() - self.busy0
+        ours = tree_cpu_seconds(self.server_pid) + sum(os.times()[:2]) - self.ours0
+        return (f"    machine during the scenario ({wall:.1f} s): {busy / wall:.2f} of {os.cpu_count()} cores busy, "
+                f"{ours / wall:.2f} by the server, its workers and the clients, "
+                f"{max(0.0, busy - ours) / wall:.2f} by other processes")
 
 
 def cpu_seconds(pid: int) -> float:
@@ -249,7 +310,10 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2, help="analysis (heavy lane) worker processes of the server")
     ap.add_argument("--light-workers", type=int, default=2, help="light lane worker processes of the server")
     ap.add_argument("--table", action="store_true", help="report: request the table of all combinations")
+    ap.add_argument("--samples", type=int, default=None,
+                    help="mixed, mixed-repeat: the light requests' 'samples' (DAFC directions; default: the server's)")
     args = ap.parse_args()
+    quick = {"samples": args.samples} if args.samples else {}
     planar = json.loads((ROOT / "examples" / "planar_disk_envelope.json").read_text())
     palm = json.loads((ROOT / "examples" / "sphere_four_finger_palm.json").read_text())
     C, R = args.clients, args.requests_per_client
@@ -269,13 +333,16 @@ def main() -> None:
                 if args.scenario not in ("all", scenario):
                     continue
                 own = {**planar, "name": f"planar-{scenario}"}  # no answer cached by another scenario
-                light = [[{"scene": own, "combination": pool[(k * R + j) % len(pool)]} for j in range(R)]
+                light = [[{"scene": own, "combination": pool[(k * R + j) % len(pool)], **quick} for j in range(R)]
                          for k in range(C)]
                 cpu0, server0 = light_workers_cpu(proc.pid), cpu_seconds(proc.pid)
+                load = Load(proc.pid)
                 run, heavy = asyncio.run(mixed(f"{base}", light, palm, scenario))
+                load_line = load.line()
                 work_ms = 1000 * (light_workers_cpu(proc.pid) - cpu0) / max(1, len(run.latencies))
                 server_ms = 1000 * (cpu_seconds(proc.pid) - server0) / max(1, len(run.latencies) + len(heavy.latencies))
                 which = "all different, none cached" if pool is combos else f"drawn from {len(pool)}"
+                which += f", samples {args.samples}" if args.samples else ", default samples"
                 out.append(f"{scenario}: {C} clients x {R} light POST /analyses (one combination each, {which}) "
                            "while 2 clients send tables of every combination (sphere_four_finger_palm, 243 "
                            f"combinations, never cached); {args.light_workers} light + {args.workers} heavy workers")
@@ -285,6 +352,7 @@ def main() -> None:
                            f"waiting on {args.light_workers} workers, the mean latency cannot be below "
                            f"{C * work_ms / args.light_workers:.0f} ms (Little's law)")
                 out.append(heavy.line("heavy"))
+                out.append(load_line)
                 if run.errors or not run.latencies or run.p(95) >= LIGHT_P95_TARGET:
                     missed.append(f"{scenario}: light p95 {1000 * run.p(95):.0f} ms (target < "
                                   f"{1000 * LIGHT_P95_TARGET:.0f}), {len(run.errors)} errors")
@@ -296,12 +364,15 @@ def main() -> None:
                 warm = asyncio.run(clients_run(base, [distinct]))  # computed once: the cache holds them
                 bodies = [[distinct[(k + j) % len(distinct)] for j in range(R)] for k in range(C)]
                 cpu0 = cpu_seconds(proc.pid)
+                load = Load(proc.pid)
                 run = asyncio.run(clients_run(base, bodies))
+                load_line = load.line()
                 server_ms = 1000 * (cpu_seconds(proc.pid) - cpu0) / max(1, len(run.latencies))
                 out.append(f"cached: {C} clients x {R} POST /analyses, each repeating one of {len(distinct)} "
                            f"analyses made before (warm-up: {len(warm.latencies)} answers); server CPU "
                            f"{server_ms:.2f} ms a request")
                 out.append(run.line("repeats"))
+                out.append(load_line)
                 if run.errors or not run.latencies or run.p(95) >= CACHED_P95_TARGET or run.hits < len(run.latencies):
                     missed.append(f"cached: p95 {1000 * run.p(95):.1f} ms (target < {1000 * CACHED_P95_TARGET:.0f}), "
                                   f"{run.hits} hits of {len(run.latencies)}, {len(run.errors)} errors")

@@ -16,7 +16,7 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, NoReturn
 
 import typer
 from pydantic import ValidationError
@@ -148,6 +148,32 @@ def run_batch(scenes_dir: Path, out_dir: Path, goal: dict[str, Any] | None, *, r
     return rows
 
 
+def output_problem(scenes_dir: Path, out_dir: Path, files: list[Path]) -> str | None:
+    """Why ``out_dir`` cannot hold the results of ``files`` (one message naming the option), or
+    None: it must be a folder (made if missing) other than ``SCENES_DIR`` (the results would be
+    read as scenes by the next run), and no two scene files may share a result file (``a.json``
+    and ``a.yaml``, or a scene file named ``summary``)."""
+    if out_dir.exists() and not out_dir.is_dir():
+        return f"out: '{out_dir}' exists and is not a folder"
+    if out_dir.resolve() == scenes_dir.resolve():
+        return f"out: '{out_dir}' is SCENES_DIR; the result files would be read as scenes by the next run"
+    by_stem: dict[str, Path] = {}
+    for f in files:
+        if f.stem == "summary":
+            return f"SCENES_DIR: '{f.name}' would share its result file with OUT/summary.json; rename it"
+        if f.stem in by_stem:
+            return (f"SCENES_DIR: '{by_stem[f.stem].name}' and '{f.name}' would share the result file "
+                    f"OUT/{f.stem}.json; rename one")
+        by_stem[f.stem] = f
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        return f"out: cannot create the folder '{out_dir}' ({e.strerror or type(e).__name__})"
+    if not os.access(out_dir, os.W_OK | os.X_OK):
+        return f"out: the folder '{out_dir}' is not writable"
+    return None
+
+
 def _row(p: Path, rec: dict[str, Any]) -> dict[str, Any]:
     return {"file": p.name, "scene": rec.get("scene", p.stem), "status": rec["status"],
             "steps": rec.get("steps"), "feasible": rec.get("feasible"), "seconds": rec.get("seconds"),
@@ -171,7 +197,7 @@ def batch(
     err = Console(stderr=True)
     console = Console()
 
-    def fail(msg: str) -> None:
+    def fail(msg: str) -> NoReturn:
         err.print(f"[bold red]error:[/] {msg}", highlight=False, soft_wrap=True)
         raise typer.Exit(2)
 
@@ -189,9 +215,15 @@ def batch(
             goal_data = parse_goal(goal)
         except (ValidationError, ValueError) as e:
             fail(f"goal: '{goal}' is not a goal ({str(e).splitlines()[0]})")
-    files = scene_files(scenes_dir)
+    try:
+        files = scene_files(scenes_dir)
+    except OSError as e:
+        fail(f"SCENES_DIR: cannot list '{scenes_dir}' ({e.strerror or type(e).__name__})")
     if not files:
         fail(f"SCENES_DIR: no scene files (.json, .yaml) in '{scenes_dir}'")
+    problem = output_problem(scenes_dir, out, files)
+    if problem:
+        fail(problem)
     with Progress(TextColumn("scenes"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   TextColumn("{task.description}"), console=err) as bar:
         task = bar.add_task("", total=len(files))
@@ -199,8 +231,13 @@ def batch(
         def on_record(p: Path, rec: dict[str, Any], skipped: bool) -> None:
             bar.update(task, advance=1, description=f"{p.name}: {'done before' if skipped else rec['status']}")
 
-        rows = run_batch(scenes_dir, out, goal_data, ray_address=ray, workers=workers, time_limit=time_limit,
-                         retry_failed=retry_failed, on_record=on_record)
+        try:
+            rows = run_batch(scenes_dir, out, goal_data, ray_address=ray, workers=workers, time_limit=time_limit,
+                             retry_failed=retry_failed, on_record=on_record)
+        except OSError as e:  # the results cannot be written (disk full, folder removed): say so
+            where = f"'{e.filename}'" if e.filename else f"'{out}'"
+            fail(f"out: cannot write {where} ({e.strerror or type(e).__name__}); the results written "
+                 "so far are kept and a new run resumes from them")
     table = Table(title=f"{len(rows)} scenes -> {out}")
     for col in ("scene", "status", "steps" if goal_data else "feasible", "time [s]", "note"):
         table.add_column(col)

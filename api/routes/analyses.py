@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
 from typing import Annotated, Any
 
 from fastapi import APIRouter, Request
@@ -11,7 +10,18 @@ from pydantic import SkipValidation
 
 from api.bodies import validated
 from api.cache import BODY_SHA256, answer, cache_key
-from api.deps import AnalysisPoolDep, CacheDep, LightPoolDep, SettingsDep, check_raw_hand_size, check_scene
+from api.deps import (
+    AnalysisPoolDep,
+    CacheDep,
+    LightPoolDep,
+    SettingsDep,
+    check_hand_size,
+    check_raw_combination,
+    check_raw_contacts,
+    check_raw_hand_size,
+    check_scene_size,
+    combination_length_error,
+)
 from api.errors import ApiError
 from api.lanes import analysis_lane, run_in_lane
 from api.schemas import AnalysisCreate, AnalysisPublic, ErrorBody
@@ -37,13 +47,15 @@ async def create_analysis(raw: Annotated[AnalysisCreate, SkipValidation], reques
     light request does not wait behind tables. A request that repeats an earlier one (the same scene
     and parameters) is answered from the content-addressed cache (header ``X-Cache: hit``), one
     identical to a request still running waits for its answer (``X-Cache: shared``)."""
-    check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
+    # the counts that need no model first: 413/422 before it spends time on a huge chain or
+    # thousands of contacts (its checks share the interpreter with the event loop)
+    check_raw_hand_size(raw, settings)
+    check_raw_contacts(raw, settings, enumerate_all=not (isinstance(raw, dict) and raw.get("combination")))
+    check_raw_combination(raw)
     body = await validated(AnalysisCreate, raw)  # off the event loop (api/bodies.py)
     scene = body.scene
     if body.combination is not None and len(body.combination) != len(scene.contacts):
-        raise ApiError(422, f"combination: '{body.combination}' has {len(body.combination)} letters; the scene "
-                            f"has {len(scene.contacts)} contacts",
-                       errors=[{"loc": ["combination"], "msg": "one letter per contact", "type": "value_error"}])
+        raise combination_length_error(body.combination, len(scene.contacts))
     if body.direction is not None:
         if body.combination is None:
             raise ApiError(422, "direction: needs combination",
@@ -53,17 +65,23 @@ async def create_analysis(raw: Annotated[AnalysisCreate, SkipValidation], reques
                                 "coordinates",
                            errors=[{"loc": ["direction"], "msg": f"needs {scene.D} components",
                                     "type": "value_error"}])
-    if body.nu is not None and body.combination is None:
-        raise ApiError(422, "nu: needs combination",
-                       errors=[{"loc": ["nu"], "msg": "needs combination", "type": "value_error"}])
+    for name in ("nu", "samples"):
+        if getattr(body, name) is not None and body.combination is None:
+            raise ApiError(422, f"{name}: needs combination",
+                           errors=[{"loc": [name], "msg": "needs combination", "type": "value_error"}])
     payload = {"scene": scene.model_dump(mode="json"), "combination": body.combination,
-               "direction": body.direction, "nu": body.nu}
+               "direction": body.direction, "nu": body.nu, "samples": body.samples}
     key = cache_key("analysis", payload)
     lane = analysis_lane(body.combination, len(scene.contacts), scene.M)
 
+    check_hand_size(scene, settings)
+    if body.combination is None:
+        check_scene_size(scene, settings)  # 413 over max_contacts for a table
+
     async def compute() -> bytes:
-        # the geometric checks build the hand's kinematics: off the event loop
-        await asyncio.to_thread(check_scene, scene, settings, enumerate_all=body.combination is None)
+        # the geometric checks (contact points on their bodies, normals in their cones) build the
+        # hand's kinematics: the worker makes them (analysis.loader.scene_from_dict) before the
+        # analysis, so the server spends no CPU on them; a SceneError is a 422 located in "scene"
         result = await run_in_lane(lane, light, pool, "analysis", payload, timeout=settings.request_time_limit)
         return AnalysisPublic.model_validate(result).model_dump_json().encode()
 

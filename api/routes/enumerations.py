@@ -9,7 +9,7 @@ from fastapi import APIRouter, Query, Response
 from pydantic import SkipValidation
 
 from api.bodies import validate_body
-from api.deps import RunnerDep, SettingsDep, StoreDep, check_raw_hand_size, check_scene
+from api.deps import RunnerDep, SettingsDep, StoreDep, check_raw_contacts, check_raw_hand_size, check_scene
 from api.routes import _jobs
 from api.schemas import AnalysisPublic, EnumerationCreate, EnumerationPublic, ErrorBody, JobList, JobStatus
 
@@ -23,6 +23,7 @@ def create_enumeration(raw: Annotated[EnumerationCreate, SkipValidation], settin
                        runner: RunnerDep, response: Response) -> dict[str, Any]:
     """Queue the enumeration of every combination; 202 with the job."""
     check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
+    check_raw_contacts(raw, settings, enumerate_all=True)  # or on thousands of contacts
     body = validate_body(EnumerationCreate, raw)  # in the thread this route runs in (api/bodies.py)
     check_scene(body.scene, settings, enumerate_all=True)
     limit = _jobs.time_limit(body.time_limit, settings.job_time_limit)

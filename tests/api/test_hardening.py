@@ -385,3 +385,37 @@ def test_the_cost_estimate_picks_the_lane(client: TestClient) -> None:
     assert r.status_code == 200 and r.headers["x-lane"] == "heavy" and len(r.json()["frames"]) == 400
     r = client.post("/scenes/geometry", json={"scene": PALM})
     assert r.status_code == 200 and r.headers["x-lane"] == "light"
+
+
+def test_health_answers_while_bodies_of_thousands_of_contacts_arrive(limited: TestClient) -> None:
+    """Four 1 MB bodies of 8,900 contacts each (two tables, an enumeration job, one combination
+    whose letters do not match): refused by counting the contacts before the model validates them
+    (which held the event loop for about a second with three at once), /health unhindered."""
+    scene = copy.deepcopy(PLANAR)
+    scene["contacts"] = [dict(scene["contacts"][0]) for _ in range(8900)]
+    table = json.dumps({"scene": scene}).encode()
+    one = json.dumps({"scene": scene, "combination": "FDFDD"}).encode()
+    assert 900_000 < len(table) < 1_000_000
+    answers: list[Any] = []
+    headers = {"content-type": "application/json"}
+    threads = [threading.Thread(target=lambda b=b: answers.append(limited.post("/analyses", content=b,
+                                                                                headers=headers)))
+               for b in (table, table, one)]
+    threads.append(threading.Thread(target=lambda: answers.append(limited.post("/enumerations", content=table,
+                                                                                headers=headers))))
+    for t in threads:
+        t.start()
+    time.sleep(0.05)
+    worst = 0.0
+    for _ in range(10):
+        t0 = time.perf_counter()
+        assert limited.get("/health").status_code == 200
+        worst = max(worst, time.perf_counter() - t0)
+    for t in threads:
+        t.join(60)
+    codes = sorted(r.status_code for r in answers)
+    assert codes == [413, 413, 413, 422], [r.text[:200] for r in answers]
+    assert all("max_contacts" in r.json()["detail"] for r in answers if r.status_code == 413)
+    bad = next(r for r in answers if r.status_code == 422)
+    assert bad.json()["detail"] == "combination: 'FDFDD' has 5 letters; the scene has 8900 contacts", bad.text
+    assert worst < 0.3, worst

@@ -18,7 +18,8 @@ from api.settings import Settings
 
 _TMP = Path(tempfile.mkdtemp(prefix="ctp-schemathesis-"))
 # jobs are accepted and stored but not run (run_jobs=False): the HTTP surface is under test here
-app = create_app(Settings(database_url=f"sqlite:///{_TMP / 'jobs.db'}", analysis_workers=1, job_workers=1,
+app = create_app(Settings(database_url=f"sqlite:///{_TMP / 'jobs.db'}", data_dir=_TMP / "data",
+                          analysis_workers=1, job_workers=1,
                           run_jobs=False, request_time_limit=10.0))
 schema = schemathesis.openapi.from_asgi("/openapi.json", app)
 
