@@ -28,7 +28,7 @@ import uuid
 import xml.etree.ElementTree as ET
 import zipfile
 import zlib
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import IO, Any
@@ -170,6 +170,21 @@ def _copy(src: IO[bytes], dst: Path, budget: list[int], limits: Limits) -> None:
             out.write(chunk)
 
 
+
+def _write_members(members: list[_Member], open_member: Callable[[_Member], Any], target: Path, budget: list[int],
+                   limits: Limits, names: list[str]) -> None:
+    """Write the checked ``members`` under ``target`` (folders made, files copied within the
+    unpacked-size ``budget``), appending the files' names to ``names``."""
+    for m in members:
+        dst = target / m.name
+        if m.is_dir:
+            dst.mkdir(parents=True, exist_ok=True)
+            continue
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        with open_member(m) as src:
+            _copy(src, dst, budget, limits)
+        names.append(m.name)
+
 def _unpack(archive: Path, target: Path, limits: Limits) -> list[str]:
     """Check every member of ``archive`` then write them under ``target`` (a new, empty folder);
     the files' names."""
@@ -180,31 +195,17 @@ def _unpack(archive: Path, target: Path, limits: Limits) -> list[str]:
     try:
         if head.startswith(b"PK\x03\x04") or head.startswith(b"PK\x05\x06"):
             with zipfile.ZipFile(archive) as z:
-                members = _checked(_zip_members(z), limits)
-                for m in members:
-                    dst = target / m.name
-                    if m.is_dir:
-                        dst.mkdir(parents=True, exist_ok=True)
-                        continue
-                    dst.parent.mkdir(parents=True, exist_ok=True)
-                    with z.open(m.handle) as src:
-                        _copy(src, dst, budget, limits)
-                    names.append(m.name)
+                _write_members(_checked(_zip_members(z), limits), lambda m: z.open(m.handle), target, budget, limits,
+                               names)
         elif tarfile.is_tarfile(archive):
             with tarfile.open(archive, "r:*") as t:
-                members = _checked(_tar_members(t), limits)
-                for m in members:
-                    dst = target / m.name
-                    if m.is_dir:
-                        dst.mkdir(parents=True, exist_ok=True)
-                        continue
-                    dst.parent.mkdir(parents=True, exist_ok=True)
+                def open_tar(m: _Member) -> Any:
                     member = t.extractfile(m.handle)
                     if member is None:
                         raise RobotArchiveError(422, f"archive member '{_shown(m.name)}': cannot be read")
-                    with member:
-                        _copy(member, dst, budget, limits)
-                    names.append(m.name)
+                    return member
+
+                _write_members(_checked(_tar_members(t), limits), open_tar, target, budget, limits, names)
         else:
             raise RobotArchiveError(422, "file: not a zip or tar archive (.zip, .tar, .tar.gz, .tgz, .tar.bz2, "
                                          ".tar.xz)")

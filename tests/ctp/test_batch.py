@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import pytest
-from service_helpers import EXAMPLES
+from service_helpers import EXAMPLES, scenes_folder
 from typer.testing import CliRunner
 
 from analysis.contacts import build_system
@@ -23,16 +22,9 @@ def _feasible(name: str) -> int:
     return sum(s.feasible for s in summaries)
 
 
-def _scenes(tmp: Path, names: tuple[str, ...] = ("planar_disk_envelope",)) -> Path:
-    d = tmp / "scenes"
-    d.mkdir()
-    for n in names:
-        shutil.copy(EXAMPLES / f"{n}.json", d / f"{n}.json")
-    return d
-
 
 def test_batch_enumerate_locally_is_resumable(tmp_path: Path) -> None:
-    scenes = _scenes(tmp_path, ("planar_disk_envelope", "sphere_four_finger_palm"))
+    scenes = scenes_folder(tmp_path, ("planar_disk_envelope", "sphere_four_finger_palm"))
     (scenes / "broken.json").write_text(json.dumps({"dim": 2, "contacts": []}))
     out = tmp_path / "results"
     r = runner.invoke(app, ["batch", str(scenes), "--enumerate", "--out", str(out), "--workers", "2"])
@@ -55,7 +47,7 @@ def test_batch_enumerate_locally_is_resumable(tmp_path: Path) -> None:
 
 
 def test_batch_bad_arguments_exit_2(tmp_path: Path) -> None:
-    scenes = _scenes(tmp_path)
+    scenes = scenes_folder(tmp_path)
     r = runner.invoke(app, ["batch", str(scenes), "--out", str(tmp_path / "o")])
     assert r.exit_code == 2 and "goal" in r.output
     r = runner.invoke(app, ["batch", str(scenes), "--goal", "sideways", "--out", str(tmp_path / "o")])
@@ -67,7 +59,7 @@ def test_batch_bad_arguments_exit_2(tmp_path: Path) -> None:
 @pytest.mark.slow
 def test_batch_on_a_local_ray_instance(tmp_path: Path) -> None:
     ray = pytest.importorskip("ray")
-    scenes = _scenes(tmp_path, ("planar_disk_envelope",))
+    scenes = scenes_folder(tmp_path, ("planar_disk_envelope",))
     (scenes / "broken.json").write_text(json.dumps({"dim": 2, "contacts": []}))
     out = tmp_path / "results"
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)

@@ -9,7 +9,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from service_helpers import EXAMPLES
+from service_helpers import scenes_folder
 from typer.testing import CliRunner
 
 import ctp.batch
@@ -17,13 +17,6 @@ from ctp.cli import app
 
 runner = CliRunner()
 
-
-def _scenes(tmp: Path, names: tuple[str, ...] = ("planar_disk_envelope",)) -> Path:
-    d = tmp / "scenes"
-    d.mkdir()
-    for n in names:
-        shutil.copy(EXAMPLES / f"{n}.json", d / f"{n}.json")
-    return d
 
 
 def _one_line_error(output: str, *words: str) -> None:
@@ -35,7 +28,7 @@ def _one_line_error(output: str, *words: str) -> None:
 
 
 def test_out_that_is_a_file_exits_2(tmp_path: Path) -> None:
-    scenes = _scenes(tmp_path)
+    scenes = scenes_folder(tmp_path)
     out = tmp_path / "results"
     out.write_text("not a folder")
     r = runner.invoke(app, ["batch", str(scenes), "--enumerate", "--out", str(out), "--workers", "1"])
@@ -45,7 +38,7 @@ def test_out_that_is_a_file_exits_2(tmp_path: Path) -> None:
 
 
 def test_out_under_a_file_exits_2(tmp_path: Path) -> None:
-    scenes = _scenes(tmp_path)
+    scenes = scenes_folder(tmp_path)
     (tmp_path / "plain").write_text("x")
     r = runner.invoke(app, ["batch", str(scenes), "--enumerate", "--out", str(tmp_path / "plain" / "results")])
     assert r.exit_code == 2
@@ -53,7 +46,7 @@ def test_out_under_a_file_exits_2(tmp_path: Path) -> None:
 
 
 def test_out_equal_to_the_scenes_folder_exits_2(tmp_path: Path) -> None:
-    scenes = _scenes(tmp_path)
+    scenes = scenes_folder(tmp_path)
     r = runner.invoke(app, ["batch", str(scenes), "--enumerate", "--out", str(scenes / ".")])
     assert r.exit_code == 2
     _one_line_error(r.output, "out:", "SCENES_DIR")
@@ -66,7 +59,7 @@ def test_out_equal_to_the_scenes_folder_exits_2(tmp_path: Path) -> None:
 ])
 def test_scene_files_that_would_share_a_result_file_exit_2(tmp_path: Path, extra: str,
                                                            words: tuple[str, ...]) -> None:
-    scenes = _scenes(tmp_path)
+    scenes = scenes_folder(tmp_path)
     shutil.copy(scenes / "planar_disk_envelope.json", scenes / extra)
     out = tmp_path / "results"
     r = runner.invoke(app, ["batch", str(scenes), "--enumerate", "--out", str(out), "--workers", "1"])
@@ -76,7 +69,7 @@ def test_scene_files_that_would_share_a_result_file_exit_2(tmp_path: Path, extra
 
 
 def test_a_missing_out_folder_is_made_with_its_parents(tmp_path: Path) -> None:
-    scenes = _scenes(tmp_path)
+    scenes = scenes_folder(tmp_path)
     out = tmp_path / "a" / "b" / "results"
     r = runner.invoke(app, ["batch", str(scenes), "--enumerate", "--out", str(out), "--workers", "1"])
     assert r.exit_code == 0, r.output
@@ -88,7 +81,7 @@ def test_a_write_that_fails_during_the_run_exits_2_and_keeps_what_was_written(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A full disk, simulated: the second result file cannot be written. Exit 2 naming the
     file and the reason; the first result stays, and the next run only does the rest."""
-    scenes = _scenes(tmp_path, ("planar_disk_envelope", "sphere_four_finger_palm"))
+    scenes = scenes_folder(tmp_path, ("planar_disk_envelope", "sphere_four_finger_palm"))
     out = tmp_path / "results"
     real_write = ctp.batch._write
     written: list[str] = []

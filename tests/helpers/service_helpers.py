@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from pathlib import Path
 from typing import Any
@@ -13,6 +14,15 @@ from api.settings import Settings
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"
+
+
+def scenes_folder(tmp: Path, names: tuple[str, ...] = ("planar_disk_envelope",)) -> Path:
+    """``tmp/scenes`` holding copies of the named examples (the input folder of ``ctp batch``)."""
+    d = tmp / "scenes"
+    d.mkdir()
+    for n in names:
+        shutil.copy(EXAMPLES / f"{n}.json", d / f"{n}.json")
+    return d
 
 
 def example(name: str) -> dict[str, Any]:
