@@ -89,7 +89,7 @@ def validation_response(errors: list[dict[str, Any]]) -> JSONResponse:
     return JSONResponse(_body(f"{_fmt(loc)}: {msg}", errors), status_code=422)
 
 
-_REQUEST_FIELDS = ("combination", "direction", "nu", "goal", "time_limit", "scene")
+_REQUEST_FIELDS = ("combination", "direction", "nu", "goal", "time_limit", "scene", "touch", "samples")
 
 
 def _in_request(loc: list[Any]) -> list[Any]:

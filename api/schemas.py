@@ -138,6 +138,9 @@ class ContactsCreate(BaseModel):
     scene: dict[str, Any]
     tolerance: Annotated[float, Field(gt=0, le=MAX_MAGNITUDE, allow_inf_nan=False)] = DEFAULT_TOLERANCE
     mu: Annotated[float, Field(ge=0, le=MAX_MAGNITUDE, allow_inf_nan=False)] = DEFAULT_MU
+    touch: Annotated[list[Annotated[str, Field(min_length=1, max_length=200)]], Field(max_length=32)] = Field(
+        default_factory=list, description="links to place on the object first (as `ctp contacts --touch`): the "
+        "configuration moves, within joint limits, until each touches it without penetration")
 
     @field_validator("scene", mode="before")
     @classmethod

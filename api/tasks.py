@@ -142,6 +142,10 @@ def run_contacts(payload: dict[str, Any], progress: Progress | None = None) -> d
     from analysis.loader import with_detected_contacts
 
     data = {k: v for k, v in payload["scene"].items() if k != "contacts"}
+    if payload.get("touch"):
+        from analysis.placement import placed_scene_data  # deferred: the placement's solver
+
+        data, _ = placed_scene_data(data, list(payload["touch"]), tolerance=payload["tolerance"])
     full, det = with_detected_contacts(data, tolerance=payload["tolerance"], mu=payload["mu"])
     scene = scene_from_dict(full)
     return {"scene": scene.model_dump(mode="json"),

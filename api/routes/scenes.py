@@ -120,11 +120,12 @@ async def scene_contacts(raw: Annotated[ContactsCreate, SkipValidation], setting
     """The contacts between the object and every finger link and fixed body at the scene's
     configuration, found from the geometry within ``tolerance`` (any ``contacts`` the scene has
     are replaced), the complete scene with them, and the near misses (closer than 10
-    tolerances, not touching). An object that touches nothing is a 422 at ``scene.contacts``.
+    tolerances, not touching). With ``touch``, the named links are first placed on the object
+    (``ctp contacts --touch``). An object that touches nothing is a 422 at ``scene.contacts``.
 
     Computed in a light worker under ``request_time_limit``; scenes over ``max_joints`` joints get 413."""
     check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
     body = await validated(ContactsCreate, raw)  # off the event loop (api/bodies.py)
-    payload = {"scene": body.scene, "tolerance": body.tolerance, "mu": body.mu}
+    payload = {"scene": body.scene, "tolerance": body.tolerance, "mu": body.mu, "touch": body.touch}
     response.headers["X-Lane"] = "light"
     return await run_in_lane("light", light, pool, "contacts", payload, timeout=settings.request_time_limit)

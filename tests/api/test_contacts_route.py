@@ -62,3 +62,19 @@ def test_upload_of_a_scene_without_contacts_returns_them(client: TestClient) -> 
     r = client.post("/scenes/upload", files=files)
     assert r.status_code == 200, r.text
     assert [c["body"] for c in r.json()["contacts"]] == [c["body"] for c in PLANAR["contacts"]]
+
+
+def test_contacts_route_places_the_touching_links_first(client: TestClient) -> None:
+    """``touch`` as in ``ctp contacts --touch``: the unplaced Panda's forearm is moved onto the
+    box, then the contacts are found; an unknown link is a 422 naming ``touch``."""
+    unplaced = example("unplaced/panda_forearm_box")
+    r = client.post("/scenes/contacts", json={"scene": unplaced, "touch": ["panda_link4"]})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert "arm/panda_link4" in [c["body"] for c in body["contacts"]]
+    assert all(c["gap"] < 1e-3 for c in body["contacts"])
+    q0, q1 = unplaced["fingers"][0]["q"], body["scene"]["fingers"][0]["q"]
+    assert not np.allclose(q0, q1)  # the arm was moved
+    bad = client.post("/scenes/contacts", json={"scene": unplaced, "touch": ["no_such_link"]})
+    assert bad.status_code == 422 and "no_such_link" in bad.text, bad.text
+    assert bad.json()["errors"][0]["loc"] == ["touch"], bad.text
