@@ -247,7 +247,20 @@ def _urdf_info(folder: Path, name: str, files: set[str]) -> dict[str, Any] | Non
         found = _mesh_member(uri, here, files, packages)
         if found is None:
             missing.append(uri)
-    joints = [{"name": j.get("name", ""), "type": j.get("type", "")} for j in root.iter("joint")]
+    def link_of(joint: Any, tag: str) -> str:
+        e = joint.find(tag)
+        return str(e.get("link", "")) if e is not None else ""
+
+    def limit_of(joint: Any, side: str) -> float | None:
+        e = joint.find("limit")
+        try:
+            return float(e.get(side)) if e is not None and e.get(side) is not None else None
+        except ValueError:
+            return None
+
+    joints = [{"name": j.get("name", ""), "type": j.get("type", ""), "parent": link_of(j, "parent"),
+               "child": link_of(j, "child"), "lower": limit_of(j, "lower"), "upper": limit_of(j, "upper")}
+              for j in root.iter("joint")]
     return {"path": name, "robot": root.get("name", ""), "links": [lk.get("name", "") for lk in root.iter("link")],
             "joints": joints, "meshes": len(meshes), "missing_meshes": missing, "packages": packages}
 

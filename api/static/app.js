@@ -11,7 +11,7 @@ const state = {
   scene: null, geometry: null, rows: [], filtered: [], page: 0, combination: null, report: null,
   dafcView: { yaw: -0.7, pitch: 0.5 }, dafcPick: null,
   extraBounds: [], job: null, pollTimer: null, plan: null, frames: [], frameIndex: 0, playTimer: null,
-  view3d: null, sceneToken: 0,
+  view3d: null, sceneToken: 0, robot: null,
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -748,6 +748,88 @@ function stepJump(dir) {
 // ---------------------------------------------------------------------------------------------
 // start-up
 
+// ---------------------------------------------------------------------------------------------
+// your robot: POST /robots, a chain of one of its URDFs, POST /scenes/contacts (touch)
+
+function chainJoints(urdf, root, tip) {
+  // the movable joints from root down to tip (null when tip is not below root)
+  const byChild = new Map(urdf.joints.map((j) => [j.child, j]));
+  const out = [];
+  for (let link = tip; link !== root;) {
+    const j = byChild.get(link);
+    if (!j) return null;
+    if (["revolute", "continuous"].includes(j.type)) out.unshift(j);
+    link = j.parent;
+  }
+  return out;
+}
+
+function fillSelect(sel, values, pick, labels) {
+  sel.innerHTML = "";
+  values.forEach((v, i) => { const o = document.createElement("option"); o.value = v; o.textContent = labels ? labels[i] : v; sel.appendChild(o); });
+  if (pick !== undefined && values.includes(pick)) sel.value = pick;
+}
+
+function robotChainChanged() {
+  const urdf = state.robot.urdf_files.find((u) => u.file === $("robot-urdf").value);
+  if (!urdf) return;
+  const links = urdf.links;
+  const children = new Set(urdf.joints.map((j) => j.child));
+  const root = $("robot-root").value && links.includes($("robot-root").value) ? $("robot-root").value
+    : links.find((l) => !children.has(l)) || links[0];
+  fillSelect($("robot-root"), links, root);
+  const below = links.filter((l) => l !== root && (chainJoints(urdf, root, l) || []).length > 0);
+  const deepest = below.reduce((a, l) => (chainJoints(urdf, root, l).length > chainJoints(urdf, root, a || l).length ? l : a), below[0]);
+  fillSelect($("robot-tip"), below, below.includes($("robot-tip").value) ? $("robot-tip").value : deepest);
+  fillSelect($("robot-touch"), ["(none: detect only)", ...below], $("robot-touch").value);
+}
+
+async function uploadRobot(file) {
+  $("robot-error").textContent = ""; $("robot-info").textContent = `uploading ${file.name} ...`;
+  const fd = new FormData(); fd.append("file", file);
+  try { state.robot = await api("POST", "/robots", fd); }
+  catch (e) { $("robot-info").textContent = ""; $("robot-error").textContent = `${file.name}: ${e.message}`; return; }
+  const r = state.robot;
+  $("robot-info").textContent = `${file.name}: ${r.files} files, ${r.urdf_files.length} URDF (${r.prefix.slice(0, 18)}…)` +
+    r.urdf_files.map((u) => u.missing_meshes.length ? ` — ${u.path}: ${u.missing_meshes.length} meshes missing` : "").join("");
+  fillSelect($("robot-urdf"), r.urdf_files.map((u) => u.file), undefined, r.urdf_files.map((u) => u.path));
+  $("robot-root").value = ""; robotChainChanged();
+  $("robot-chain").hidden = false;
+}
+
+async function placeRobot() {
+  $("robot-error").textContent = "";
+  const urdf = state.robot.urdf_files.find((u) => u.file === $("robot-urdf").value);
+  const root = $("robot-root").value, tip = $("robot-tip").value;
+  const joints = chainJoints(urdf, root, tip);
+  if (!joints || !joints.length) { $("robot-error").textContent = `no revolute joint from '${root}' to '${tip}'`; return; }
+  const cur = state.scene && state.scene.dim === 3 ? state.scene : null;
+  const base = cur && cur.fingers.length && cur.fingers[0].base ? cur.fingers[0].base : { position: [0, 0, 0], quat_wxyz: [1, 0, 0, 0] };
+  const scene = {
+    name: `${urdf.robot || "robot"}-${cur ? cur.name : "box"}`, dim: 3,
+    object: cur ? cur.object : { pose: { position: [0.5, 0, 0.3], quat_wxyz: [1, 0, 0, 0] }, shape: { type: "box", size: [0.2, 0.2, 0.2] } },
+    external_wrench: cur ? cur.external_wrench : [0, 0, -9.81, 0, 0, 0],
+    fixed_bodies: cur ? cur.fixed_bodies : [],
+    fingers: [{ name: "robot", base, urdf: { file: urdf.file, root_link: root, tip_link: tip }, q: joints.map(startAngle), link_radius: 0.05 }],
+    contacts: [],
+  };
+  const touch = $("robot-touch").value;
+  const body = { scene, touch: below(urdf, root).includes(touch) ? [touch] : [] };
+  try {
+    const found = await api("POST", "/scenes/contacts", body);
+    await setScene(found.scene, `${scene.name} (${found.contacts.length} contacts found)`);
+  } catch (e) { $("robot-error").textContent = e.message; }
+}
+
+function startAngle(j) {
+  // 0 where the joint's URDF limits allow it, else the middle of its range
+  const lo = j.lower == null || j.type === "continuous" ? -Infinity : j.lower;
+  const hi = j.upper == null || j.type === "continuous" ? Infinity : j.upper;
+  return lo <= 0 && 0 <= hi ? 0 : 0.5 * (lo + hi);
+}
+
+function below(urdf, root) { return urdf.links.filter((l) => l !== root && (chainJoints(urdf, root, l) || []).length > 0); }
+
 async function init() {
   const redrawDafc = () => { if (state.report) drawDafc(); };
   enableDragRotate($("dafc-trans"), state.dafcView, redrawDafc);
@@ -764,6 +846,9 @@ async function init() {
   $("prev-btn").addEventListener("click", () => stepJump(-1));
   $("next-btn").addEventListener("click", () => stepJump(1));
   $("frame-slider").addEventListener("input", (e) => { stopPlaying(); setFrame(Number(e.target.value)); });
+  $("robot-file").addEventListener("change", (e) => { const f = e.target.files[0]; if (f) uploadRobot(f); });
+  for (const id of ["robot-urdf", "robot-root"]) $(id).addEventListener("change", robotChainChanged);
+  $("robot-detect").addEventListener("click", placeRobot);
   $("upload").addEventListener("change", async (e) => {
     const file = e.target.files[0]; if (!file) return;
     const fd = new FormData(); fd.append("file", file);

@@ -5,6 +5,7 @@ screenshot to test-artifacts/."""
 
 from __future__ import annotations
 
+import io
 import itertools
 import shutil
 import time
@@ -350,3 +351,92 @@ def test_docs_offline_and_job_state(tmp_path: Path) -> None:
     finally:
         stop_server(server)
         shutil.rmtree(profile, ignore_errors=True)
+
+
+def _robot_archive(path: Path) -> Path:
+    """The Panda of example-robot-data as an archive a user would upload: its own package
+    ``my_arm`` (visual and collision meshes), the URDFs' mesh URIs pointing into it."""
+    import tarfile
+
+    from analysis.urdf import example_robot_data_dir
+
+    erd = example_robot_data_dir()
+    assert erd is not None
+    with tarfile.open(path, "w:gz") as t:
+        for p in sorted((erd / "panda_description").rglob("*")):
+            if not p.is_file():
+                continue
+            data = p.read_bytes()
+            if p.suffix == ".urdf":
+                data = data.replace(b"package://example-robot-data/robots/panda_description/", b"package://my_arm/")
+            info = tarfile.TarInfo("my_arm/" + p.relative_to(erd / "panda_description").as_posix())
+            info.size = len(data)
+            t.addfile(info, io.BytesIO(data))
+    return path
+
+
+@pytest.mark.slow
+def test_an_uploaded_robot_is_placed_and_drawn(tmp_path: Path) -> None:
+    """Upload a URDF archive on the dashboard, pick its chain, place its forearm on the current
+    example's box: the found scene (robot:<hash>/... URDF, a contact on the touched link) is drawn
+    in WebGL with the upload's own meshes, with every request off this server blocked."""
+    if not CHROMIUM.exists():
+        pytest.skip("no /usr/bin/chromium: install Debian's chromium (apt-get install chromium) to run the "
+                    "browser test")
+    from playwright.sync_api import expect, sync_playwright
+
+    archive = _robot_archive(tmp_path / "my_arm.tar.gz")
+    port = free_port()
+    base = f"http://127.0.0.1:{port}"
+    server = start_server(tmp_path, port, CTP_DATA_DIR=str(tmp_path / "data"))
+    try:
+        with sync_playwright() as pw:
+            ctx = _chromium(pw, tmp_path / "chromium-profile")
+            blocked: list[str] = []
+
+            def only_this_server(route: Any) -> None:
+                if route.request.url.startswith(base + "/"):
+                    route.continue_()
+                else:
+                    blocked.append(route.request.url)
+                    route.abort()
+
+            ctx.route("**/*", only_this_server)
+            page = ctx.pages[0] if ctx.pages else ctx.new_page()
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(f"{base}/")
+            expect(page.locator("body[data-ready='1']")).to_have_count(1, timeout=30_000)
+            page.select_option("#example-select", "panda_forearm_box.json")  # the box and table to use
+            expect(page.locator("body[data-scene-ready='1']")).to_have_count(1, timeout=120_000)
+            page.click("#robot-panel summary")
+            page.set_input_files("#robot-file", str(archive))
+            expect(page.locator("#robot-chain")).to_be_visible(timeout=60_000)
+            assert page.locator("#robot-error").inner_text() == ""
+            page.select_option("#robot-urdf", label="my_arm/urdf/panda.urdf")
+            page.select_option("#robot-root", "panda_link0")
+            page.select_option("#robot-tip", "panda_link7")
+            page.select_option("#robot-touch", "panda_link4")
+            page.click("#robot-detect")
+            page.wait_for_function(
+                "() => document.getElementById('scene-info').textContent.includes('contacts found')"
+                " || document.getElementById('robot-error').textContent !== ''", timeout=120_000)
+            assert page.locator("#robot-error").inner_text() == "", page.locator("#robot-error").inner_text()
+            expect(page.locator("body[data-scene-ready='1']")).to_have_count(1, timeout=120_000)
+            assert page.locator("#robot-error").inner_text() == ""
+            scene = page.evaluate("() => window.ctpDashboard.state.scene")
+            assert scene["fingers"][0]["urdf"]["file"].startswith("robot:")
+            assert "robot/panda_link4" in [c["body"] for c in scene["contacts"]], scene["contacts"]
+            # the upload's own meshes, fetched from /robots/<hash>/files/..., in WebGL
+            assert page.locator("#scene-3d").get_attribute("data-robots") == "1"
+            assert int(page.locator("#scene-3d").get_attribute("data-meshes") or 0) >= 8
+            assert page.locator("#scene-error").inner_text() == ""
+            pixels = page.evaluate(COUNT_ROBOT_PIXELS)
+            assert pixels["context"] and pixels["shown"] > pixels["hidden"] + 100, pixels
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.screenshot(path=str(ARTIFACTS / "dashboard-uploaded-robot.png"), full_page=True)
+            assert not blocked, blocked
+            assert not errors, errors
+            ctx.close()
+    finally:
+        stop_server(server)
