@@ -206,3 +206,30 @@ def test_planar_fingertips_placed_on_the_disk() -> None:
     assert {n for n, _ in placement.touch} == set(names)
     _, detection = with_detected_contacts(placed)
     assert set(names) <= {c.body for c in detection.contacts}
+
+
+def test_baxter_touch_example_is_what_ctp_contacts_touch_writes(tmp_path: Path) -> None:
+    """The two-arm example written by the command in its description, from a scene without
+    contacts whose arms start off the box: the same q and contacts come out, elbows and
+    forearms on the box's sides and the table's four corners."""
+    bundled = json.loads((ROOT / "examples" / "baxter_hug_box_touch.json").read_text())
+    command = bundled["description"].split("Written by: ")[1].split()
+    assert command[:2] == ["ctp", "contacts"]
+    out = tmp_path / "baxter.json"
+    args = [a if a != "examples/baxter_hug_box_touch.json" else str(out) for a in command[1:]]
+    args = [str(ROOT / a) if a.startswith("examples/") else a for a in args]
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    written = json.loads(out.read_text())
+    for f, g in zip(written["fingers"], bundled["fingers"], strict=True):
+        np.testing.assert_allclose(f["q"], g["q"], atol=1e-9)
+    assert [c["body"] for c in written["contacts"]] == [c["body"] for c in bundled["contacts"]]
+    for c, k in zip(written["contacts"], bundled["contacts"], strict=True):
+        np.testing.assert_allclose(c["point"], k["point"], atol=1e-8)
+        np.testing.assert_allclose(c["normal"], k["normal"], atol=1e-8)
+    bodies = {c["body"] for c in bundled["contacts"]}
+    assert {f"{s}/{s}_{k}" for s in ("left", "right") for k in ("lower_elbow", "upper_forearm")} <= bodies
+    assert sum(c["body"] == "table" for c in bundled["contacts"]) == 4
+    unplaced = json.loads((ROOT / "examples" / "unplaced" / "baxter_hug_box.json").read_text())
+    assert "contacts" not in unplaced
+    assert not np.allclose(unplaced["fingers"][0]["q"], bundled["fingers"][0]["q"])  # the arms were moved
