@@ -218,6 +218,21 @@ def _chromium(pw: Any, profile: Path) -> Any:
         viewport={"width": 1280, "height": 1100})
 
 
+def _only_this_server(ctx: Any, base: str) -> list[str]:
+    """Every request of the browser context that is not to ``base`` is aborted and listed."""
+    blocked: list[str] = []
+
+    def route(r: Any) -> None:
+        if r.request.url.startswith(base + "/"):
+            r.continue_()
+        else:
+            blocked.append(r.request.url)
+            r.abort()
+
+    ctx.route("**/*", route)
+    return blocked
+
+
 @pytest.mark.slow
 def test_docs_offline_and_job_state(tmp_path: Path) -> None:
     """/docs renders Swagger UI with every request off this server blocked; the vendored modules
@@ -235,16 +250,7 @@ def test_docs_offline_and_job_state(tmp_path: Path) -> None:
     try:
         with sync_playwright() as pw:
             ctx = _chromium(pw, profile)
-            blocked: list[str] = []
-
-            def only_this_server(route: Any) -> None:
-                if route.request.url.startswith(base + "/"):
-                    route.continue_()
-                else:
-                    blocked.append(route.request.url)
-                    route.abort()
-
-            ctx.route("**/*", only_this_server)
+            blocked = _only_this_server(ctx, base)
             page = ctx.pages[0] if ctx.pages else ctx.new_page()
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
@@ -392,16 +398,7 @@ def test_an_uploaded_robot_is_placed_and_drawn(tmp_path: Path) -> None:
     try:
         with sync_playwright() as pw:
             ctx = _chromium(pw, tmp_path / "chromium-profile")
-            blocked: list[str] = []
-
-            def only_this_server(route: Any) -> None:
-                if route.request.url.startswith(base + "/"):
-                    route.continue_()
-                else:
-                    blocked.append(route.request.url)
-                    route.abort()
-
-            ctx.route("**/*", only_this_server)
+            blocked = _only_this_server(ctx, base)
             page = ctx.pages[0] if ctx.pages else ctx.new_page()
             errors: list[str] = []
             page.on("pageerror", lambda e: errors.append(str(e)))
