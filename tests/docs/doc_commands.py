@@ -106,18 +106,19 @@ class Result:
     seconds: float
 
 
-def _quote_state(text: str, state: str | None = None) -> str | None:
-    """The quote left open at the end of ``text`` (None if none), bash rules for ' " and backslash."""
+def _scan(line: str, state: str | None) -> tuple[str | None, int | None]:
+    """One line read by bash's quoting rules (' " and backslash) from the open quote ``state``:
+    the quote still open at its end, and where an unquoted ``# comment`` starts (None: none)."""
     i = 0
-    while i < len(text):
-        c = text[i]
+    while i < len(line):
+        c = line[i]
         if state is None:
             if c == "\\":
                 i += 1
             elif c in "'\"":
                 state = c
-            elif c == "#" and (i == 0 or text[i - 1].isspace()):
-                return None  # the rest of the line is a comment
+            elif c == "#" and (i == 0 or line[i - 1].isspace()):
+                return None, i  # the rest of the line is a comment
         elif state == "'":
             if c == "'":
                 state = None
@@ -126,6 +127,14 @@ def _quote_state(text: str, state: str | None = None) -> str | None:
         elif c == '"':
             state = None
         i += 1
+    return state, None
+
+
+def _quote_state(text: str) -> str | None:
+    """The quote left open at the end of ``text`` (None if none)."""
+    state: str | None = None
+    for line in text.split("\n"):
+        state, _ = _scan(line, state)
     return state
 
 
@@ -134,28 +143,7 @@ def strip_comment(text: str) -> str:
     out = []
     state: str | None = None
     for line in text.split("\n"):
-        cut = len(line)
-        s = state
-        i = 0
-        while i < len(line):
-            c = line[i]
-            if s is None:
-                if c == "\\":
-                    i += 1
-                elif c in "'\"":
-                    s = c
-                elif c == "#" and (i == 0 or line[i - 1].isspace()):
-                    cut = i
-                    break
-            elif s == "'":
-                if c == "'":
-                    s = None
-            elif c == "\\":
-                i += 1
-            elif c == '"':
-                s = None
-            i += 1
-        state = s
+        state, cut = _scan(line, state)
         out.append(line[:cut].rstrip())
     return "\n".join(out).strip()
 
