@@ -288,12 +288,11 @@ def analyze_combination(
         grasp_min: StationaryGrasp | None = pair[1]
     except NoStationaryGrasp as e:
         grasp = grasp_min = None
-        if sy.tau_max is not None and "torque limits" in str(e):
-            stationary_note: str | None = str(e).split(": ", 1)[-1]
-        else:
-            stationary_note = None
+        failure = str(e)
     else:
-        stationary_note = None
+        failure = ""
+    # only the torque limits stand in the way: the error names the joints and torques needed
+    stationary_note = failure.split(": ", 1)[-1] if "within the joint torque limits" in failure else None
     summary = summarize(parts, stationary_known=grasp is not None)
     oracle = parts.oracle()
     if samples is None:  # the circle/sphere densely, higher-dimensional motion spaces coarsely

@@ -47,3 +47,12 @@ def test_quality_columns_and_json_fields(tmp_path: Path) -> None:
         rep = analyze_combination(system, row["combination"]).to_json()
         assert row["quality"]["epsilon"] == rep["quality"]["epsilon"]
         assert row["quality"]["wrench_ball"] == rep["quality"]["wrench_ball"]
+
+
+def test_a_report_says_when_only_the_limits_stop_the_stationary_grasp(tmp_path: Path) -> None:
+    result = runner.invoke(app, ["analyze", str(_limited(tmp_path, [0.5, 10.0, 0.5, 10.0])), "--combination",
+                                 "FSFDD"], terminal_width=200)
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.output.split())
+    assert "not feasible (no stationary grasp (18))" in text
+    assert "note: no stationary grasp (18) within the joint torque limits" in text and "left/j0" in text
