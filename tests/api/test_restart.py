@@ -3,6 +3,7 @@ again on the same store, and every accepted job completes."""
 
 from __future__ import annotations
 
+import sqlite3
 import time
 from pathlib import Path
 
@@ -76,12 +77,18 @@ def test_a_graceful_stop_requeues_at_once(tmp_path: Path) -> None:
     stop_server(server)
     assert server.returncode is not None
     stopped_at = time.time()
-    t0 = time.monotonic()
+    # back in the queue the moment the server stopped, not held by its lease until it runs out (a
+    # crashed server's job stays "running" with its owner): read the store while no server runs
+    with sqlite3.connect(tmp_path / "jobs.db") as db:
+        status, owner, attempts = db.execute("SELECT status, owner, attempts FROM jobs WHERE id = ?",
+                                             (urls[0].rsplit("/", 1)[-1],)).fetchone()
+    assert (status, owner, attempts) == ("queued", None, 0), (status, owner, attempts)
     server = start_server(tmp_path, port, CTP_JOB_LEASE_SECONDS="30")
     try:
+        deadline = time.monotonic() + 240  # generous: the time the two enumerations take on a busy machine
         for url in urls:
             while (body := httpx.get(base + url, timeout=10).json())["status"] in ("queued", "running"):
-                assert time.monotonic() - t0 < 25, body  # well inside the 30 s lease
+                assert time.monotonic() < deadline, body
                 time.sleep(0.1)
             assert body["status"] == "succeeded" and body["attempts"] == 1, body
         first = httpx.get(base + urls[0], timeout=10).json()
