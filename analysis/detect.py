@@ -17,7 +17,9 @@ checks use):
 :func:`link_distances` gives the signed distance of every link to the object and to every fixed
 body at any configuration, with the witness point and direction whose product with the point
 Jacobian is the distance's gradient: the placement (:mod:`analysis.placement`) and collision
-checks use the same geometry.
+checks use the same geometry. :class:`SceneGeometry` keeps the same coal bodies for many queries
+at moving configurations and object poses: the planner's collision checks
+(:mod:`planner.collision`) take a URDF link's collision shapes and a mesh object from it.
 
 A 2-D scene lies in the plane ``z = 0``: a disk is the sphere of its radius (its section by the
 plane is the disk), a box or polygon the prism over it (``|z| <= PRISM_HALF_HEIGHT``), so the
@@ -51,7 +53,9 @@ is kept once where one of them has length 0 (a fingertip sphere; see ``_distinct
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import coal
 import numpy as np
@@ -92,6 +96,7 @@ __all__ = [
     "Detection",
     "LinkDistance",
     "NearMiss",
+    "SceneGeometry",
     "UnplacedScene",
     "detect_contacts",
     "link_distances",
@@ -555,6 +560,94 @@ def link_distances(scene: Scene, hand: HandKinematics, q: Array,
             nu = float(np.linalg.norm(u))
             out.append(LinkDistance(ref, name, d, x_b, u / nu if nu > 0 else u))
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# Repeated distance queries (the planner's collision checks)
+
+#: A body placed in the world as coal takes it: ``(coal geometry, coal.Transform3s)``.
+Placed = tuple[Any, Any]
+
+
+class SceneGeometry:
+    """The detector's geometry of a scene, for many signed-distance queries at moving
+    configurations and object poses (the planner's collision checks, :mod:`planner.collision`).
+
+    Every body is what :func:`link_distances` and :func:`detect_contacts` take it to be: a URDF
+    link with ``"link_geometry": "urdf"`` its collision shapes (a mesh: its convex hull,
+    :func:`analysis.mesh.hull_of`), any other link the capsule about its axis (of a radius the
+    caller chooses: the planner takes the bare axis, radius 0, and subtracts its own capsule
+    radius), the object its shape (a mesh: its hull) at any pose, a fixed body its shape. The
+    coal geometries are built once; a query only places them (a link: its pose at ``q``, one
+    forward-kinematics evaluation; the object: ``(R, p) * T_local``) and calls coal's signed
+    distance (GJK, EPA when penetrating, ``gjk_tolerance = 1e-12``)."""
+
+    def __init__(self, scene: Scene, hand: HandKinematics):
+        self.scene = scene
+        self.hand = hand
+        self._req = coal.DistanceRequest()
+        self._req.gjk_tolerance = 1e-12
+        self._req.enable_signed_distance = True
+        obj = _shape_solid(scene.object.shape, np.eye(3), np.zeros(3), scene.dim, ("object", "shape"))
+        tf: Any = obj.tf
+        self._object_local = (obj.geom, np.array(tf.getRotation(), dtype=float),
+                              np.array(tf.getTranslation(), dtype=float))
+        self.fixed: list[Placed] = [(s.geom, s.tf) for s in
+                                    (_fixed_solid(fb, i, scene.dim) for i, fb in enumerate(scene.fixed_bodies))]
+        self._local: dict[tuple[int, int], list[tuple[Any, Array, Array]] | None] = {}
+
+    def local_shapes(self, finger: int, link: int) -> list[tuple[Any, Array, Array]] | None:
+        """The URDF collision shapes of a link in its own frame, ``(coal geometry, R (3, 3), t (3,))``
+        (a mesh replaced by its convex hull, as the detector takes it); ``None``: a capsule link."""
+        key = (finger, link)
+        if key not in self._local:
+            shapes = getattr(self.hand.fingers[finger], "collision_shapes", None)
+            local = None if shapes is None else shapes(link)
+            if local is not None:
+                local = [(g if isinstance(g, coal.Sphere | coal.Box | coal.Cylinder | coal.Capsule)
+                          else hull_of(g).geom, np.asarray(R, dtype=float), np.asarray(t, dtype=float))
+                         for g, R, t in local]
+            self._local[key] = local
+        return self._local[key]
+
+    def has_shapes(self, finger: int) -> bool:
+        """Whether the finger's links are URDF collision shapes (``"link_geometry": "urdf"``)."""
+        return self.local_shapes(finger, 0) is not None
+
+    def link_bodies(self, ref: BodyRef, q: Array, radius: float = 0.0) -> list[Placed]:
+        """The link ``ref`` at the hand configuration ``q`` ``(M,)``: its URDF shapes placed by the
+        link's pose, or its capsule of ``radius`` about :meth:`HandKinematics.body_segment`."""
+        assert ref.finger is not None and ref.link is not None
+        local = self.local_shapes(ref.finger, int(ref.link))
+        if local is None:
+            a, b = self.hand.body_segment(ref, q)
+            s = _capsule(a, b, radius)
+            return [(s.geom, s.tf)]
+        R_l, p_l = self.hand.body_pose(ref, q)
+        R_l, p_l = np.asarray(R_l, dtype=float), _as3(p_l)
+        return [(g, coal.Transform3s(R_l @ R, p_l + R_l @ t)) for g, R, t in local]
+
+    def segment_body(self, a: Array, b: Array, radius: float = 0.0) -> Placed:
+        """The capsule of ``radius`` about the segment ``[a, b]`` (world, ``(dim,)``)."""
+        s = _capsule(a, b, radius)
+        return (s.geom, s.tf)
+
+    def object_at(self, position: Array, rotation: Array) -> Placed:
+        """The object at the pose ``position`` ``(dim,)``, ``rotation`` ``(3, 3)``."""
+        g, R0, t0 = self._object_local
+        R = np.asarray(rotation, dtype=float)
+        return (g, coal.Transform3s(R @ R0, _as3(position) + R @ t0))
+
+    def distance(self, a: Sequence[Placed], b: Sequence[Placed]) -> float:
+        """Smallest signed distance (negative: penetration depth) between the bodies ``a`` and
+        ``b`` (each a union of placed convex shapes); ``inf`` when either is empty. A fresh
+        ``DistanceResult`` per pair: coal keeps the smaller of a reused result's distance and the
+        new one for convex hulls (a stale penetration would be reported)."""
+        best = np.inf
+        for ga, ta in a:
+            for gb, tb in b:
+                best = min(best, float(coal.distance(ga, ta, gb, tb, self._req, coal.DistanceResult())))
+        return float(best)
 
 
 def _clean(v: Array) -> tuple[float, ...]:

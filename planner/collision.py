@@ -1,4 +1,5 @@
-"""Capsule collision model of the hand and its Lipschitz clearance certificate.
+"""Collision model of the hand (capsules, or the real geometry) and its Lipschitz clearance
+certificate.
 
 * **Capsules.** Every finger link is a capsule around its
   :meth:`~analysis.kinematics.HandKinematics.body_segment` of radius
@@ -31,6 +32,23 @@
   segments; a cylinder by its rims) the smaller of the signed distances of each one's vertices
   and edge points, at most ``sample_step`` apart, to the other: a penetration is missed only
   where an edge crosses the other body over less than ``sample_step``.
+* **Real geometry (issue 10).** A finger with ``"link_geometry": "urdf"`` is checked with the
+  URDF's own collision shapes (boxes, spheres, cylinders, capsules, meshes as their convex hulls)
+  and an object of shape ``mesh`` with its convex hull: the geometry of the contact detector and
+  the scene validation (:class:`analysis.detect.SceneGeometry`, coal's signed distance, exact up
+  to GJK's ``1e-12``). Every link has a *core* and a radius, and a clearance is the core's signed
+  distance minus the radii: a URDF link's core is the union of its shapes (the last chain link
+  also carries the links fixed beyond it, a fingertip) with radius 0, not inflated and not
+  trimmed at its base (the real geometry, so a link resting on a fixed body at the start is
+  ``mounted`` as before); a capsule link's core is its axis with the capsule radius above. Every
+  pair where a URDF core or a mesh object takes part goes through coal; every other pair keeps
+  the capsule formulas above unchanged (a capsule scene is checked exactly as before, at the same
+  cost). A mesh object against the fixed bodies (:meth:`CollisionModel.object_clearance`) is
+  coal's distance of its hull too. Where two bodies overlap, coal's signed distance is the
+  penetration depth (the shortest translation that separates them, EPA), the capsule formulas'
+  the depth of the deepest point: both are negative exactly when the bodies overlap, and an
+  allowance at the start of a motion is compared with the same pair's own measure. The
+  Lipschitz bound of a URDF finger covers its shapes' farthest points.
 * **Certificate.** :func:`path_clearance_certified` checks a joint-space polyline, every
   configuration and not only samples: the clearance at a checked configuration bounds how far the
   joints may move (``|dx| <= K |dq|``, :meth:`CollisionModel.lipschitz`) before a capsule can
@@ -48,10 +66,11 @@ from typing import Any
 import numpy as np
 
 from analysis._types import Array
+from analysis.detect import Placed, SceneGeometry
 from analysis.geometry import box_signed_distance, object_size, shape_signed_distance
 from analysis.kinematics import BodyRef, HandKinematics, SerialChain, segment_distance
 from analysis.rotations import skew
-from analysis.scene import Box, Cylinder, Disk, Polygon, Scene, Segment, Sphere
+from analysis.scene import Box, Cylinder, Disk, Mesh, Polygon, Scene, Segment, Sphere
 
 #: Joint-space step (rad) of the dense collision check: 1 mm of joint motion.
 DENSE_STEP = 1e-3
@@ -245,11 +264,16 @@ class _FingerData:
     pairs: Array  # (p, 2) own non-adjacent link pairs, then (own link, link of another checked finger)
     pair_radii: Array  # (p,) sum of the capsule radii of each pair
     rot_K: list[tuple[Array, Array]] | None  # serial chains: (K, K @ K) of every joint axis
+    urdf: bool  # the links are URDF collision shapes (coal), radius 0
+    coal_object: bool  # the object distances through coal (URDF links, or a mesh object)
+    coal_pairs: Array  # (p_c,) indices of the pairs where a URDF core takes part (coal)
+    stacked: list[BodyRef]  # the stacked links of ``pairs``: own, then the other checked fingers'
 
 
 @dataclass(frozen=True)
 class CollisionModel:
-    """Capsule model of the hand against the object, the fixed bodies and the other fingers."""
+    """Collision model of the hand against the object, the fixed bodies and the other fingers:
+    capsules, or the URDF's collision shapes and a mesh object's hull (see the module notes)."""
 
     scene: Scene
     hand: HandKinematics
@@ -283,6 +307,11 @@ class CollisionModel:
         R = np.asarray(rotation, dtype=float)[:d, :d]
         pos = np.asarray(position, dtype=float)[:d]
         best = np.inf
+        if isinstance(shape, Mesh):  # its convex hull against each body (coal)
+            if not self.scene.fixed_bodies:
+                return float(best)
+            geo = self.geometry
+            return geo.distance([geo.object_at(position, rotation)], geo.fixed)
         own = self._boundary("object", shape)
         for k, fb in enumerate(self.scene.fixed_bodies):
             if isinstance(shape, Disk | Sphere):  # exact: the centre's distance minus the radius
@@ -307,9 +336,59 @@ class CollisionModel:
         got: Array | None = self._cache[ck]
         return got
 
+    @property
+    def geometry(self) -> SceneGeometry:
+        """The detector's geometry of the scene (built on first use: capsule scenes never do)."""
+        got = self._cache.get("geometry")
+        if got is None:
+            got = self._cache["geometry"] = SceneGeometry(self.scene, self.hand)
+        return got
+
+    def is_urdf(self, finger: int) -> bool:
+        """Whether the finger's links are checked with their URDF collision shapes."""
+        key = ("urdf", finger)
+        if key not in self._cache:
+            shapes = getattr(self.hand.fingers[finger], "collision_shapes", None)
+            self._cache[key] = shapes is not None and shapes(0) is not None
+        return bool(self._cache[key])
+
+    def cores(self, finger: int, q: Array) -> list[list[Placed]]:
+        """The core of every link of ``finger`` at the hand configuration ``q`` (see the module
+        notes): a URDF link's shapes (the last link with the links fixed beyond it), or a capsule
+        link's bare axis."""
+        geo = self.geometry
+        refs = self.links(finger)
+        if not self.is_urdf(finger):
+            A, B = self.segment_arrays(finger, q)
+            return [[geo.segment_body(a, b)] for a, b in zip(A, B, strict=True)]
+        names = self.hand.fingers[finger].body_names()
+        out: list[list[Placed]] = [geo.link_bodies(r, q) for r in refs]
+        for k in range(len(refs), len(names)):  # links fixed beyond the last joint
+            out[-1] += geo.link_bodies(BodyRef(names[k], finger, k), q)
+        return out
+
+    def _cores_cached(self, finger: int, q: Array) -> list[list[Placed]]:
+        """:meth:`cores` of a finger that does not move (cached by its joint values)."""
+        sl = self.hand.finger_slice(finger)
+        key = ("cores", finger, np.asarray(q[sl], dtype=float).tobytes())
+        got = self._cache.get(key)
+        if got is None:
+            if len(self._cache) > 4096:
+                for k in [k for k in self._cache if k[0] in ("segs", "cores")]:
+                    del self._cache[k]
+            got = self._cache[key] = self.cores(finger, q)
+        return got
+
     def fingers_distance(self, i: int, j: int, q: Array) -> float:
-        """Smallest clearance between the capsules of fingers ``i`` and ``j``."""
+        """Smallest clearance between the links of fingers ``i`` and ``j`` (capsules, or coal
+        where a finger has URDF shapes)."""
         best = np.inf
+        if self.is_urdf(i) or self.is_urdf(j):
+            ci, cj = self.cores(i, q), self.cores(j, q)
+            for a, ca in zip(self.links(i), ci, strict=True):
+                for b, cb in zip(self.links(j), cj, strict=True):
+                    best = min(best, self.geometry.distance(ca, cb) - self.radius(a) - self.radius(b))
+            return float(best)
         for a in self.links(i):
             a0, a1 = self.hand.body_segment(a, q)
             for b in self.links(j):
@@ -322,6 +401,10 @@ class CollisionModel:
         return [BodyRef(f"{f.name}/{k}", finger, k) for k in range(f.n_joints)]
 
     def radius(self, ref: BodyRef, inflate: bool = True) -> float:
+        """The capsule radius of a link (``max(link radius, min_radius)``, inflated by half the
+        sample step); 0 for a link with URDF shapes (its real geometry, coal distances)."""
+        if ref.finger is not None and self.is_urdf(ref.finger):
+            return 0.0
         r = max(self.hand.body_radius(ref), self.min_radius)
         return r + (self.sample_step / 2.0 if inflate else 0.0)
 
@@ -372,7 +455,13 @@ class CollisionModel:
         A, B = self.segment_arrays(finger, q)
         R = np.asarray(rotation, dtype=float)[:d, :d]
         pos = np.asarray(position, dtype=float)[:d]
-        od = _shape_segments_distance(self.scene.object.shape, (A - pos) @ R, (B - pos) @ R, d, self.sample_step)
+        cores = None
+        if fd.coal_object:  # coal: the real geometry
+            cores = self.cores(finger, q)
+            body = [self.geometry.object_at(position, rotation)]
+            od = np.array([self.geometry.distance(c, body) for c in cores])
+        else:
+            od = _shape_segments_distance(self.scene.object.shape, (A - pos) @ R, (B - pos) @ R, d, self.sample_step)
         # a link beyond the last joint (a URDF tip link) is the end of the last capsule
         touch = np.zeros(n, dtype=bool)
         for t in touching:
@@ -380,7 +469,12 @@ class CollisionModel:
                 touch[min(int(t.link), n - 1)] = True
         parts = [np.where(touch, np.maximum(0.0, od - fd.r_true + 1e-9), od - fd.r_infl)]
         fixed = np.full(n, np.inf)
-        if fd.any_fixed:
+        if fd.any_fixed and fd.urdf:  # URDF shapes: not trimmed, only mounted links are not checked
+            assert cores is not None
+            geo = self.geometry
+            fixed = np.array([geo.distance(c, geo.fixed) if ok else np.inf
+                              for c, ok in zip(cores, fd.fixed_checked, strict=True)])
+        elif fd.any_fixed:
             D = B - A
             L = np.sqrt((D * D).sum(axis=1))
             Ab = A - fd.base
@@ -403,7 +497,14 @@ class CollisionModel:
             S0, S1 = A, B
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):
-            parts.append(segment_segment_distances(S0[i], S1[i], S0[j], S1[j]) - fd.pair_radii)
+            pd = segment_segment_distances(S0[i], S1[i], S0[j], S1[j])
+            if len(fd.coal_pairs):  # pairs with a URDF core: coal between the cores
+                own = cores if cores is not None else self.cores(finger, q)
+                stacked = own + [c for o in others for c in self._cores_cached(o, q)]
+                geo = self.geometry
+                for k in fd.coal_pairs:
+                    pd[k] = geo.distance(stacked[i[k]], stacked[j[k]])
+            parts.append(pd - fd.pair_radii)
         return np.concatenate(parts)
 
     def _finger_data(self, finger: int) -> _FingerData:
@@ -418,25 +519,33 @@ class CollisionModel:
                 rot_K = [(skew(a), skew(a) @ skew(a)) for a in chain.axes]
             r_infl = np.array([self.radius(r) for r in refs])
             radii = [r_infl]  # of the stacked segments: own links, then the other checked fingers'
+            stacked_refs = list(refs)
             for j in range(len(self.hand.fingers)):
                 if j != finger and (min(j, finger), max(j, finger)) in self.finger_pairs:
                     radii.append(np.array([self.radius(r) for r in self.links(j)]))
+                    stacked_refs += self.links(j)
             stacked = np.concatenate(radii)
             pairs = [(i, j) for i in range(n) for j in range(i + 2, n)]
             pairs += [(i, j) for i in range(n) for j in range(n, len(stacked))]
             pa = np.array(pairs, dtype=int).reshape(-1, 2)
             fixed_checked = np.array([bool(self.scene.fixed_bodies) and (finger, k) not in self.mounted
                                       for k in range(n)], dtype=bool)
+            urdf = np.array([self.is_urdf(int(r.finger)) for r in stacked_refs if r.finger is not None], dtype=bool)
+            coal_pairs = np.flatnonzero(urdf[pa[:, 0]] | urdf[pa[:, 1]]) if len(pa) else np.zeros(0, dtype=int)
             got = _FingerData(
                 refs,
                 r_infl,
-                np.array([self.hand.body_radius(r) for r in refs]),
+                np.array([0.0 if self.is_urdf(finger) else self.hand.body_radius(r) for r in refs]),
                 fixed_checked,
                 bool(fixed_checked.any()),
                 np.asarray(chain.body_pose(0, self.hand.q0[sl])[1][: self.scene.dim], dtype=float),
                 pa,
                 stacked[pa[:, 0]] + stacked[pa[:, 1]],
                 rot_K,
+                self.is_urdf(finger),
+                self.is_urdf(finger) or isinstance(self.scene.object.shape, Mesh),
+                coal_pairs,
+                stacked_refs,
             )
             self._cache[("finger", finger)] = got
         return got
@@ -482,6 +591,9 @@ class CollisionModel:
         """Clearance of a link to the fixed bodies; a link starting at the finger's base joint
         (mounted on the palm) is trimmed near it (a zero-length link is the joint itself)."""
         r = self.radius(self.links(finger)[link])
+        if self.is_urdf(finger):  # the real shapes: no trim
+            geo = self.geometry
+            return geo.distance(self.cores(finger, self.hand.q0)[link], geo.fixed)
         chain = self.hand.fingers[finger]
         base = chain.body_pose(0, self.hand.q0[self.hand.finger_slice(finger)])[1][: self.scene.dim]
         if float(np.linalg.norm(a - base)) < 1e-9:
@@ -499,15 +611,59 @@ class CollisionModel:
 
     def lipschitz(self, finger: int) -> float:
         """Bound on the speed of any point of the finger per unit joint motion (``|dx| <= K |dq|``):
-        ``K = sqrt(sum_j R_j^2)`` with ``R_j`` the reach of the finger beyond joint ``j``."""
+        ``K = sqrt(sum_j R_j^2)`` with ``R_j`` the reach of the finger beyond joint ``j``. A point
+        ``x`` of link ``k`` is at most ``sum_{i=j}^{k-1} L_i + e_k`` from joint ``j <= k`` (``L_i``
+        the link axes, ``e_k`` the farthest point of link ``k``'s URDF shapes from its joint), so
+        each link counts ``max(L_k, e_k)``."""
         f = self.hand.fingers[finger]
         q = self.hand.q0[self.hand.finger_slice(finger)]
+        extents = self._shape_extents(finger) if self.is_urdf(finger) else np.zeros(f.n_joints)
         lengths = []
         for k in range(f.n_joints):
             a, b = f.body_segment(k, q)
-            lengths.append(float(np.linalg.norm(b - a)) + float(np.linalg.norm(a - f.body_pose(k, q)[1])))
+            lengths.append(max(float(np.linalg.norm(b - a)) + float(np.linalg.norm(a - f.body_pose(k, q)[1])),
+                               float(extents[k])))
         reach = np.cumsum(lengths[::-1])[::-1] + self.min_radius
         return float(np.sqrt(np.sum(reach**2)))
+
+    def _shape_extents(self, finger: int) -> Array:
+        """``e_k`` ``(n,)``: the largest distance of a point of link ``k``'s URDF shapes (the last
+        link: with the links fixed beyond it) from the link's joint, bounded per shape (a box or
+        hull by its vertices, a sphere, cylinder or capsule by its bounding sphere); cached."""
+        got = self._cache.get(("extents", finger))
+        if got is None:
+            got = self._cache[("extents", finger)] = self._compute_extents(finger)
+        return np.asarray(got)
+
+    def _compute_extents(self, finger: int) -> Array:
+        f = self.hand.fingers[finger]
+        q = self.hand.q0
+        names = f.body_names()
+        out = np.zeros(f.n_joints)
+        for m in range(len(names)):
+            k = min(m, f.n_joints - 1)
+            local = self.geometry.local_shapes(finger, m)
+            R_m, p_m = self.hand.body_pose(BodyRef(names[m], finger, m), q)
+            o_k = self.hand.body_pose(BodyRef(names[k], finger, k), q)[1]
+            for g, R, t in local or []:
+                centre = np.asarray(p_m) + np.asarray(R_m) @ t  # (3,) world
+                name = type(g).__name__
+                if name == "Sphere":
+                    e = float(np.linalg.norm(centre - o_k)) + float(g.radius)
+                elif name == "Cylinder":
+                    e = float(np.linalg.norm(centre - o_k)) + float(np.hypot(g.radius, g.halfLength))
+                elif name == "Capsule":
+                    e = float(np.linalg.norm(centre - o_k)) + float(g.halfLength + g.radius)
+                else:  # a box (its corners) or a convex hull (its vertices)
+                    if name == "Box":
+                        h = np.asarray(g.halfSide, dtype=float)
+                        V = np.array(list(itertools.product(*[(-x, x) for x in h])))  # (8, 3)
+                    else:
+                        V = np.asarray(g.points(), dtype=float)  # (k, 3)
+                    W = centre + (V @ R.T) @ np.asarray(R_m).T  # (k, 3) world
+                    e = float(np.linalg.norm(W - o_k, axis=1).max())
+                out[k] = max(out[k], e)
+        return out
 
 
 def path_clearance_certified(
