@@ -45,6 +45,11 @@ class Goal(BaseModel):
       (contacts on fixed bodies such as the palm may remain), and the contacts hold the object
       (a stationary grasp, 18): a regrasp from an enveloping grasp to a fingertip grasp (the
       paper's Fig. 5, steps 1 to 3, the palm still holding);
+    * ``displacement``: the object moved by ``displacement`` from its pose in the scene (2-D
+      ``[dx, dy, dtheta]``, 3-D ``[dx, dy, dz, wx, wy, wz]``, ``w`` a world rotation vector:
+      :meth:`analysis.pose.Pose.displaced`), "push by dx" ``[-0.1, 0, 0, 0, 0, 0]``, "lift by dz"
+      ``[0, 0, 0.03, 0, 0, 0]``; the planner turns it into the ``pose`` goal of that pose
+      (:meth:`Goal.resolved`), with the same tolerances;
     * ``pose``: the object pose ``pose`` (2-D ``[x, y, theta]``, 3-D ``[x, y, z, rx, ry, rz]`` with
       a rotation vector): the position within ``position_tolerance`` (scene units, metres for
       robot scenes; default :data:`DEFAULT_POSITION_TOLERANCE` object sizes,
@@ -58,9 +63,10 @@ class Goal(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    type: Literal["active", "passive", "combination", "pose", "fingertips"]
+    type: Literal["active", "passive", "combination", "pose", "fingertips", "displacement"]
     combination: Annotated[str, Field(min_length=1, pattern=r"^[FNSDfnsd]+$")] | None = None
     pose: list[FiniteFloat] | None = None
+    displacement: list[FiniteFloat] | None = None
     tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
     position_tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
     rotation_tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] | Literal["free"] | None = None
@@ -74,7 +80,23 @@ class Goal(BaseModel):
             raise ValueError("goal type 'pose' needs the field 'pose'")
         if self.pose is not None and len(self.pose) not in (3, 6):
             raise ValueError("pose must have 3 (2-D: x, y, theta) or 6 (3-D: x, y, z, rotation vector) values")
+        if self.type == "displacement" and self.displacement is None:
+            raise ValueError("goal type 'displacement' needs the field 'displacement' (e.g. [-0.1, 0, 0, 0, 0, 0])")
+        if self.displacement is not None and len(self.displacement) not in (3, 6):
+            raise ValueError("displacement must have 3 (2-D: dx, dy, dtheta) or 6 (3-D: dx, dy, dz, rotation "
+                             "vector) values")
         return self
+
+    def resolved(self, start: Pose) -> Goal:
+        """The goal for an object that starts at ``start``: a ``displacement`` goal becomes the
+        ``pose`` goal of ``start`` displaced by it (:meth:`analysis.pose.Pose.displaced`), the same
+        tolerances; any other goal is returned as it is."""
+        if self.type != "displacement":
+            return self
+        assert self.displacement is not None
+        target = start.displaced(np.asarray(self.displacement, dtype=float))
+        return self.model_copy(update={"type": "pose", "pose": [float(v) for v in target.vector()],
+                                       "displacement": None})
 
     def position_tol(self, size: float) -> float:
         """The position tolerance in scene units, for an object of size ``size``."""
@@ -198,7 +220,11 @@ def goal_reached(goal: Goal, state: GraspState, hand: HandKinematics,
     combination: :func:`combination_reached`; pose: position and rotation each within its
     tolerance). ``analysis`` gives the (cached) analysis of a state; ``size`` is the object size
     (:func:`analysis.geometry.object_size`) of the default position tolerance (default: from the
-    state's analysis)."""
+    state's analysis). A ``displacement`` goal is first resolved against the start pose
+    (:meth:`Goal.resolved`, as :func:`planner.plan.plan` does); testing it unresolved is an error."""
+    if goal.type == "displacement":
+        raise SceneError(("goal", "type"), "a displacement goal is tested after Goal.resolved(start pose) turns it "
+                         "into a pose goal")
     if goal.type == "pose":
         if size is None:
             size = object_size(analysis(state).scene)

@@ -3,7 +3,8 @@
 In the ambient coordinates ``x = [q (M); s (D)]`` of OMPL's constrained planning (``q`` the hand
 configuration, ``s`` the object displacement from the state's pose, :meth:`analysis.pose.Pose.displaced`),
 :class:`ContactManifold` is ``F(x) = 0``: every sticking contact's body point stays on its object
-point (eq. 7) and every sliding contact keeps touching (eq. 5, normal component only). Its
+point (eq. 7) and every sliding contact keeps touching (eq. 5, normal component only: a disk or
+sphere on any body, or an object point of any other object on a fixed body's surface). Its
 Jacobian at ``s = 0`` is ``A_c`` (eq. 19), so its tangent space there is the motion space.
 :func:`project_manifold` projects an ambient point onto it (minimum-norm Newton steps, as OMPL's
 ``ProjectedStateSpace`` does); :func:`pose_displacement` gives the ``s`` of a pose vector.
@@ -44,9 +45,13 @@ class ContactManifold:
 
     ``F(x)`` ``(d * n_F + n_S,)`` stacks, for every sticking contact ``i``, the body point minus the
     object point, ``x_b,i(q) - (p_o + dp + R(s) c_i)``, which is zero on the manifold (the F-points
-    of eq. 7 do not move relative to each other), and for every sliding contact (S or N, disks and
-    spheres only) the gap between the body's surface and the object's, which is zero while it
-    slides (eq. 5: only the normal component is constrained). The Jacobian is ``[J_c, -G^T]`` in
+    of eq. 7 do not move relative to each other), and for every sliding contact (S or N) the gap
+    between the body's surface and the object's, which is zero while it slides (eq. 5: only the
+    normal component is constrained, the tangential motion is free): on a disk or sphere the
+    distance of its centre from the body minus the radius (the contact point moves on both), on
+    any other object a contact on a fixed body only, whose object point ``c_i`` (a box corner on a
+    table) stays on the body's surface, ``sd_body(p_o + dp + R(s) c_i) = 0``, with Jacobian
+    ``u^T [I, -[R c_i]x J_l(w)]`` (``u`` the body's outward unit normal there). The Jacobian is ``[J_c, -G^T]`` in
     these coordinates, so ``F'(x) [dq; ds] = 0`` at ``s = 0`` is ``A_c [dq; dr] = 0`` (eq. 7, 19).
 
     With ``direction`` (a unit ``dr`` ``(D,)``, the analysed DAFC direction of an object motion)
@@ -75,13 +80,31 @@ class ContactManifold:
             else:
                 self.items.append((ref, np.asarray(c.point_body, float), np.asarray(c.point_object, float)))
         self.sliding: list[BodyRef] = []
+        #: per sliding contact: ``None`` (a disk or sphere: the gap of its centre) or the object-frame
+        #: point ``(d,)`` (a vertex, edge or face corner of any other object on a fixed body: that point
+        #: stays on the body's surface while it slides along it)
+        self.sliding_points: list[Array | None] = []
+        self.radius = 0.0
         if sliding:
-            if scene is None or not isinstance(scene.object.shape, Disk | Sphere):
-                raise SceneError(("object", "shape"), "sliding contacts are followed for disks and spheres only")
-            self.scene, self.radius = scene, float(scene.object.shape.radius)
+            if scene is None:
+                raise SceneError(("object", "shape"), "sliding contacts need the scene (its shapes)")
+            self.scene = scene
+            shape = scene.object.shape
+            if isinstance(shape, Disk | Sphere):
+                self.radius = float(shape.radius)
         for i in sliding:
-            ref = hand.resolve_body(state.contacts[i].body)
+            c = state.contacts[i]
+            ref = hand.resolve_body(c.body)
             assert ref is not None
+            if isinstance(self.scene.object.shape, Disk | Sphere):
+                self.sliding_points.append(None)
+            elif ref.finger is None:
+                self.sliding_points.append(np.asarray(c.point_object, dtype=float))
+            else:
+                raise SceneError(("object", "shape"),
+                                 f"a sliding contact of a link (contact {i}, {c.body}) is followed for disk and "
+                                 f"sphere objects only (the object is a {self.scene.object.shape.type}); on other "
+                                 "objects only contacts on fixed bodies slide")
             self.sliding.append(ref)
         #: ``B`` ``(D, k)``: an orthonormal basis of the complement of ``direction`` in the motion
         #: space (``k = a~ - 1``); the rows ``B^T s = 0`` keep the object on the analysed direction
@@ -132,6 +155,11 @@ class ContactManifold:
         (object frame ``(d,)``) where the body touches the disk or sphere."""
         q, s = x[: self.M], x[self.M:]
         pose = self.pose(s)
+        po = self.sliding_points[k]
+        if po is not None:  # an object point on a fixed body: it stays, the body's point moves
+            y = pose.to_world(po)
+            _, u, _ = self.body_distance(self.sliding[k], y, q)
+            return y, np.array(po, dtype=float), pose.R_d.T @ u
         _, u, _ = self.body_distance(self.sliding[k], pose.position, q)
         y = pose.position - self.radius * u  # the touching point, on both surfaces when the gap is zero
         return y, pose.to_local(y), pose.R_d.T @ u
@@ -150,6 +178,10 @@ class ContactManifold:
             xb = pb[:d] if ref is None else self.hand.point_position(ref, pb, q)
             out[d * k: d * k + d] = xb - pose.to_world(po)
         for k, ref in enumerate(self.sliding):  # S-points: the gap to the disk/sphere is zero
+            c = self.sliding_points[k]
+            if c is not None:  # an object point on a fixed body: its distance from the surface is zero
+                out[d * len(self.items) + k] = self.body_distance(ref, pose.to_world(c), q)[0]
+                continue
             out[d * len(self.items) + k] = self.body_distance(ref, pose.position, q)[0] - self.radius
         out[self._base:] = self.complement.T @ s  # on the line of the analysed direction
         return out
@@ -173,6 +205,16 @@ class ContactManifold:
                 J[r, self.M + 3:] = skew(y) @ _left_jacobian_so3(s[3:])
         for k, ref in enumerate(self.sliding):  # d gap = u^T (d p_o - J(y) dq); the centre is p_o
             row = d * len(self.items) + k
+            c = self.sliding_points[k]
+            if c is not None:  # d gap = u^T d x_o, x_o = p_o + dp + R(s) c (the body is fixed)
+                _, u, _ = self.body_distance(ref, pose.to_world(c), q)
+                y = R_d @ c
+                J[row, self.M: self.M + d] = u
+                if d == 2:
+                    J[row, self.M + 2] = u @ np.array([-y[1], y[0]])
+                else:
+                    J[row, self.M + 3:] = -u @ skew(y) @ _left_jacobian_so3(s[3:])
+                continue
             _, u, yb = self.body_distance(ref, pose.position, q)
             if ref.finger is not None:
                 J[row, : self.M] = -u @ self.hand.point_jacobian(ref, yb, q)

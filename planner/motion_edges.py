@@ -1,7 +1,8 @@
 """Object-motion edges (paper eq. 30-32): the object moves along a DAFC direction.
 
 With the contacts of a set ``S_D`` in state D (by default the contacts on fixed bodies: the palm
-lets go), possibly the fixed-body contacts sliding (S, disks and spheres) and the others F, the
+lets go), possibly the fixed-body contacts sliding (S: a disk or sphere on the palm, a box's
+corners along the table) and the others F, the
 combination is feasible (18 and 22), the direction is a DAFC member, and the torque set T (32) is
 not empty; its recommended torque and the motion ``dzeta_c`` chosen by (31) move the object until
 the D-contacts have separated by ``clearance`` (towards a goal pose: at most ``motion_step``).
@@ -12,6 +13,7 @@ planning (:func:`~planner.object_motion.plan_object_motion`).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -19,12 +21,17 @@ import numpy as np
 from analysis._types import Array
 from analysis.exceptions import CTPError
 from analysis.pose import Pose
-from analysis.scene import Disk, Sphere
 from analysis.torques import torque_set
 from planner.goals import pose_goal_remaining
 from planner.manifold import ContactManifold
 from planner.nodes import GraphNodes
-from planner.object_motion import ConstrainedObjectMotion, integrate_object_motion, keep_contacts, plan_object_motion
+from planner.object_motion import (
+    ConstrainedObjectMotion,
+    corner_normal,
+    integrate_object_motion,
+    keep_contacts,
+    plan_object_motion,
+)
 from planner.state import GraspContact, GraspState
 from planner.transition import ObjectMotionFigures, Transition
 
@@ -51,13 +58,9 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
     plans: list[tuple[tuple[int, ...], tuple[int, ...]]] = [(dset, ()) for dset in subsets]  # (D-set, S-set)
     slide = options.sliding_motions
     if (goal.type == "pose" if slide is None else slide) and fixed and len(fixed) < L:
-        shape = nodes.scene.object.shape
-        if isinstance(shape, Disk | Sphere):
-            plans.append(((), fixed))
-        else:  # said in the plan's reason (planner.plan), not silently left out
-            nodes.reject(f"{UNSUPPORTED}sliding the {shape.type} on the fixed bodies was not tried: object motions "
-                         "with sliding contacts (S) are followed for disk and sphere objects only, sliding on "
-                         f"fixed bodies (the object is a {shape.type})")
+        # the contacts on fixed bodies slide (a disk or sphere rolling its contact point along, any
+        # other object keeping its corners on the body's surface: ContactManifold), the fingers stick
+        plans.append(((), fixed))
     for dset, sset in plans:
         comb = _letters(state, dset, sset)
         best = None
@@ -115,7 +118,7 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
             continue
         end = state.with_contacts(_slid_contacts(nodes, state, sset, om), om.q_path[-1])
         final = end.with_pose(Pose.from_vector(om.pose_path[-1], state.dim))
-        new = keep_contacts(final, sorted(keep + list(sset)), om.q_path[-1])
+        new = _turned_normals(nodes, keep_contacts(final, sorted(keep + list(sset)), om.q_path[-1]))
         if nodes.held(new) is None:
             continue
         jl = float(np.sum(np.linalg.norm(np.diff(om.q_path, axis=0), axis=1)))
@@ -178,6 +181,23 @@ def _slid_contacts(nodes: GraphNodes, state: GraspState, sset: tuple[int, ...],
         c = state.contacts[i]
         out[i] = GraspContact(c.body, nodes.hand.to_local(ref, y, om.q_path[-1]), p_obj, n_obj, c.mu, c.origin)
     return tuple(out)
+
+
+def _turned_normals(nodes: GraphNodes, state: GraspState) -> GraspState:
+    """The state with the normal of every contact on a vertex or an edge of the object turned to
+    the touching body's surface normal (:func:`~planner.object_motion.corner_normal`): a sticking
+    contact keeps its point on the link and on the object (eq. 7), not the link's orientation, so
+    a forearm across a box's edge rolls about it while the box moves; the normal stays valid while
+    it lies in the object's normal cone there, which the new state's scene check decides."""
+    out = list(state.contacts)
+    for i, c in enumerate(state.contacts):
+        ref = nodes.hand.resolve_body(c.body)
+        if ref is None:
+            continue
+        n = corner_normal(nodes.scene, nodes.hand, ref, state.q, state.pose, c.point_object)
+        if n is not None:
+            out[i] = replace(c, normal_object=n)
+    return state.with_contacts(tuple(out))
 
 
 def _direction_candidates(nodes: GraphNodes, state: GraspState, p: Any, dset: tuple[int, ...],

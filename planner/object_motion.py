@@ -32,9 +32,11 @@ from ompl import geometric as og
 from ompl import util as ou
 
 from analysis._types import Array
-from analysis.geometry import shape_signed_distance
+from analysis.geometry import link_shapes, segment_normal_cone, shape_normal_cone, shape_signed_distance
 from analysis.kinematics import BodyRef, HandKinematics
+from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
+from analysis.scene import Scene
 from planner.budget import CheckBudget
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel
 from planner.ik import joint_limits
@@ -151,7 +153,8 @@ def integrate_object_motion(
     only the end configuration is checked for collisions (the path is then planned by
     :func:`plan_object_motion`).
 
-    ``sliding`` contacts (S or N; disk and sphere objects) keep touching while they slide."""
+    ``sliding`` contacts (S or N) keep touching while they slide: a disk or sphere on any body,
+    the corner of any other object on a fixed body (a box's corners along the table)."""
     hand = model.hand
     dr = np.asarray(dr, dtype=float)
     dr = dr / np.linalg.norm(dr)
@@ -191,6 +194,34 @@ def integrate_object_motion(
     length = float(np.sum(np.linalg.norm(np.diff(np.array(poses), axis=0), axis=1)))
     return ObjectMotion(np.array(qs), np.array(poses), seps_a, length, worst_res, dr,
                         None if motion_space is None else np.asarray(motion_space, dtype=float))
+
+
+def corner_normal(scene: Scene, hand: HandKinematics, ref: BodyRef, q: Array, pose: Pose,
+                  point_object: Array) -> Array | None:
+    """The contact normal ``(d,)`` (object frame, unit, into the object) of a contact whose object
+    point ``point_object`` ``(d,)`` is on a vertex or an edge of the object (a box corner on the
+    table, a box edge across a forearm): there the object has a normal cone, not a normal, and
+    the normal is the smooth body's, its outward surface normal at the point (a fixed body's
+    face, a link's capsule at ``q`` ``(M,)``). ``None`` where the object is smooth at the point
+    (its own normal holds) or the body has no single normal there (a URDF collision mesh, a bare
+    segment, an edge of a fixed body)."""
+    d = scene.dim
+    cone = shape_normal_cone(scene.object.shape, point_object, d, GEOMETRY_TOL)
+    if cone is None or cone.generators.shape[0] < 2:  # a face (or a mesh): the object's own normal
+        return None
+    x = pose.to_world(point_object)
+    if ref.finger is None:
+        body = next(b for b in scene.fixed_bodies if b.name == ref.name)
+        bcone = shape_normal_cone(body.shape, x, d, GEOMETRY_TOL)
+    elif link_shapes(hand, ref, q) is None:
+        a, b = hand.body_segment(ref, q)
+        bcone = segment_normal_cone(x, a[:d], b[:d], hand.body_radius(ref), GEOMETRY_TOL)
+    else:
+        return None
+    if bcone is None or bcone.generators.shape[0] != 1:
+        return None
+    u = pose.R_d.T @ bcone.generators[0]
+    return np.asarray(u / np.linalg.norm(u))
 
 
 def keep_contacts(state: GraspState, keep: Sequence[int], q: Array) -> GraspState:
@@ -274,11 +305,12 @@ def plan_object_motion(
     rank = int(np.linalg.matrix_rank(J0, tol=1e-9))
     if rank >= n:  # the contacts and the direction leave no motion
         return None
-    # OMPL needs fewer constraint rows than ambient dimensions: redundant rows (several contacts on
-    # one link, a grasp without finger redundancy on the direction's line) are combined into
-    # ``rank`` rows along the left singular vectors of F'(x0); every state planned is checked on
-    # the full F below (valid_full), so the combination cannot let a state leave the manifold
-    U = np.linalg.svd(J0)[0][:, :rank].T if man.rows >= n else None  # (rank, rows)
+    # OMPL needs fewer constraint rows than ambient dimensions and as many as the co-dimension:
+    # redundant rows (several contacts on one link, a grasp without finger redundancy on the
+    # direction's line, four box corners sliding on one table plane) are combined into ``rank``
+    # rows along the left singular vectors of F'(x0); every state planned is checked on the full F
+    # below (valid_full), so the combination cannot let a state leave the manifold
+    U = np.linalg.svd(J0)[0][:, :rank].T if man.rows >= n or rank < man.rows else None  # (rank, rows)
 
     def valid_full(x: Array) -> bool:
         return U is None or float(np.linalg.norm(man.function(x))) <= 100 * tolerance

@@ -8,7 +8,7 @@ returns a :class:`Plan`: ordered steps, each with its kind (``release``/``contac
 torques (``tau_st`` of (18), the chosen member of T (32) and a summary of T) and the analysis
 figures that justify it. A plan that cannot be found is a :class:`Plan` with ``found = False`` and
 a ``reason`` naming the constraint that blocked the search (first, a motion the planner does not
-support for this object, e.g. sliding a box); a start that already meets the goal is a found plan
+support for this object); a start that already meets the goal is a found plan
 with no steps whose ``reason`` says so (:data:`START_MEETS_GOAL`); :attr:`Plan.outcome` (in the
 JSON too) tells the three apart. Malformed input raises :class:`analysis.exceptions.SceneError`.
 """
@@ -34,6 +34,7 @@ from analysis.scene import Scene
 from planner.goals import Goal, check_combination, goal_heuristic, goal_reached
 from planner.graph import ContactStateGraph
 from planner.motion_edges import UNSUPPORTED
+from planner.object_motion import corner_normal
 from planner.options import PlannerOptions
 from planner.search import best_first_search
 from planner.state import GraspContact, GraspState, all_f, state_from_scene
@@ -91,8 +92,9 @@ def _state_from_file(scene: Scene, hand: HandKinematics, bodies: tuple[str, ...]
     """The grasp state after a step as the plan file gives it: hand at ``q`` ``(M,)``, object at
     ``pose_vector`` ``(D,)``, ``bodies`` touching at the world ``points`` ``(L, d)`` (NaN when the
     file has none). The file stores neither normals nor friction: each contact gets the object's
-    inward surface normal there and the ``mu`` of the scene's contact on the same body, else the
-    smallest scene ``mu``."""
+    inward surface normal there (on a vertex or an edge of the object, the touching body's normal:
+    :func:`~planner.object_motion.corner_normal`) and the ``mu`` of the scene's contact on the same
+    body, else the smallest scene ``mu``."""
     d = scene.dim
     pose = Pose.from_vector(pose_vector, d)
     mus = {c.body: float(c.mu) for c in scene.contacts}
@@ -103,8 +105,9 @@ def _state_from_file(scene: Scene, hand: HandKinematics, bodies: tuple[str, ...]
         ref = hand.resolve_body(body)
         assert ref is not None  # checked by Plan.from_json
         local = pose.to_local(p)  # (d,) object frame
-        contacts.append(GraspContact(body, hand.to_local(ref, p, q), local, _inward_normal(scene, local),
-                                     mus.get(body, mu_default)))
+        n = corner_normal(scene, hand, ref, q, pose, local) if np.all(np.isfinite(local)) else None
+        contacts.append(GraspContact(body, hand.to_local(ref, p, q), local,
+                                     _inward_normal(scene, local) if n is None else n, mus.get(body, mu_default)))
     return GraspState(tuple(contacts), q, pose.position, pose.rotation, d)
 
 
@@ -339,6 +342,8 @@ def check_goal(scene: Scene, goal: Goal) -> None:
         raise TypeError(f"goal must be a planner.goals.Goal, got {type(goal).__name__}")
     if goal.pose is not None and len(goal.pose) != scene.D:
         raise SceneError(("goal", "pose"), f"must have {scene.D} values for a {scene.dim}-D scene")
+    if goal.displacement is not None and len(goal.displacement) != scene.D:
+        raise SceneError(("goal", "displacement"), f"must have {scene.D} values for a {scene.dim}-D scene")
     for i, w in enumerate(goal.wrenches or []):
         if len(w) != scene.D:
             raise SceneError(("goal", "wrenches", i), f"must have {scene.D} components")
@@ -354,7 +359,8 @@ def plan(
     max_expansions: int = 200,
     options: PlannerOptions | None = None,
 ) -> Plan:
-    """Plan contact-state transitions from the scene's grasp to ``goal``.
+    """Plan contact-state transitions from the scene's grasp to ``goal``; a ``displacement`` goal
+    is planned (and recorded in the plan) as the pose goal it resolves to from the scene's pose.
 
     ``progress(fraction, message)`` is called after every node expansion (fraction of the
     expansion budget, or of ``time_limit`` when that is larger) and at the end with 1.0.
@@ -365,8 +371,9 @@ def plan(
         raise SceneError(("time_limit",), "must be positive")
     t0 = time.perf_counter()
     hand = HandKinematics.from_scene(scene)
-    graph = ContactStateGraph(scene, hand, goal, options or PlannerOptions())
     start = state_from_scene(scene, hand)
+    goal = goal.resolved(start.pose)  # a displacement goal: the pose goal it asks for
+    graph = ContactStateGraph(scene, hand, goal, options or PlannerOptions())
     key = graph.add(start)
 
     def report(n: int, node: Any) -> None:

@@ -52,7 +52,7 @@ from analysis._types import Array
 from analysis.contacts import build_system, parse_combination
 from analysis.exceptions import SceneError
 from analysis.geometry import object_size
-from analysis.kinematics import HandKinematics
+from analysis.kinematics import BodyRef, HandKinematics
 from analysis.scene import Scene
 from sim.mjcf import (
     DEFAULT_PARAMS,
@@ -154,6 +154,31 @@ class SimulationResult:
 
 # --------------------------------------------------------------------------------------------
 # Simulation
+
+
+def self_motion_torque(hand: HandKinematics, points: list[tuple[BodyRef, Array]], q: Array, q_ref: Array,
+                       gains: Array) -> Array:
+    """A posture torque ``(M,)`` that acts on the self-motion of the hand only:
+    ``P diag(gains) P (q_ref - q)``, ``P = I - J_c^+ J_c`` the projector onto the joint motions that
+    move none of the contact points ``points`` (``(finger body, point in its frame)``; ``J_c``
+    their stacked point Jacobians at ``q``), ``q_ref`` ``(M,)`` the planned configuration.
+
+    A redundant arm under pure torque control (the paper's model) has directions of joint motion
+    that move no contact point (a 7-joint arm touching with one point: 4 of them), in which the
+    contact forces cannot hold it: under constant joint torques its elbow swings sideways
+    (measured on the Panda's forearm push: joints 1 and 3 counter-rotate, growing about
+    ``e^(12 t)``, until the forearm leaves the box after 6 cm). The torque lies in ``range(P)``,
+    orthogonal to ``range(J_c^T)``, so no contact force can balance it: it moves the hand along
+    its self-motion, back onto the planned posture, and vanishes there; the torques that reach
+    the contacts (``J_c^+T tau``) are unchanged by it."""
+    rows = [hand.point_jacobian(ref, hand.point_position(ref, pb, q), q) for ref, pb in points]
+    M = hand.M
+    if rows:
+        J = np.vstack(rows)  # (3 k, M)
+        P = np.eye(M) - np.linalg.pinv(J, rcond=1e-10) @ J  # (M, M)
+    else:
+        P = np.eye(M)
+    return np.asarray(P @ (np.asarray(gains, float) * (P @ (np.asarray(q_ref, float) - np.asarray(q, float)))))
 
 
 def smooth_ramp(t: float, T: float) -> float:

@@ -175,12 +175,11 @@ def test_pose_goal_json_stays_backward_compatible() -> None:
 # -- motions the planner does not support ------------------------------------------------------
 
 
-def test_no_plan_names_the_unsupported_sliding_of_a_box(box_scene: Scene) -> None:
+def test_sliding_a_box_on_the_table_is_tried_not_refused(box_scene: Scene) -> None:
     push = state_from_scene(box_scene).pose_vector()
-    push[0] += 0.1  # push the box 10 cm along the table: its table contacts would have to slide
+    push[0] += 0.1  # push the box 10 cm along the table: its table contacts have to slide
     p = plan(box_scene, Goal(type="pose", pose=[float(x) for x in push]), max_expansions=1)
-    assert not p.found and p.outcome == "no_plan"
-    assert p.reason.startswith("not supported: sliding the box"), p.reason
-    assert "disk and sphere objects only" in p.reason and "the object is a box" in p.reason
-    assert p.reason.count("not supported") == 1  # said once, not again among the counts
-    assert any(k.startswith("not supported") for k in p.rejections)
+    assert not p.found and p.outcome == "no_plan"  # one expansion does not get the hug there
+    # box corners slide on fixed bodies (issue 11, tests/planner/test_push.py): no longer a limit
+    assert "not supported" not in p.reason, p.reason
+    assert not any(k.startswith("not supported") for k in p.rejections)
