@@ -506,9 +506,13 @@ def contacts(
 @app.command()
 def plan(
     scene: Annotated[Path, typer.Argument(help="scene file (.json, .yaml)")],
-    goal: Annotated[str, typer.Option(help="active | passive | fingertips | combination | pose")] = "active",
+    goal: Annotated[str, typer.Option(help="active | passive | fingertips | combination | pose | displacement")
+                    ] = "active",
     combination: Annotated[str | None, typer.Option(help="goal combination, e.g. FSDD (--goal combination)")] = None,
     pose: Annotated[str | None, typer.Option(help="goal pose: 2-D 'x y theta', 3-D 'x y z rx ry rz'")] = None,
+    displacement: Annotated[str | None, typer.Option(
+        help="goal displacement from the start pose (push by dx, lift by dz): 2-D 'dx dy dtheta', "
+             "3-D 'dx dy dz rx ry rz'")] = None,
     position_tolerance: Annotated[float | None, typer.Option(
         help="pose goal: position tolerance in scene units (metres); default 1 % of the object size")] = None,
     rotation_tolerance: Annotated[str | None, typer.Option(
@@ -521,7 +525,8 @@ def plan(
 ) -> None:
     """Plan contact-state transitions from the scene's grasp to a goal: active or passive closure,
     fingertip contacts only, a combination (one letter per scene contact: D released, the others
-    still touching in that state) or an object pose.
+    still touching in that state), an object pose, or a displacement of the object from its start
+    (``--goal displacement --displacement '-0.1 0 0 0 0 0'``: push by 10 cm along -x).
 
     Exit codes: 0 a plan was found (or the start already meets the goal; with --replay: and the
     replay met it); 1 no plan was found (the reason is printed); 2 bad input; 3 (--replay) the
@@ -543,11 +548,13 @@ def plan(
     try:
         g = Goal(type=goal, combination=combination,
                  pose=None if pose is None else [float(x) for x in _parse_vector(pose, "pose")],
+                 displacement=None if displacement is None else [
+                     float(x) for x in _parse_vector(displacement, "displacement")],
                  tolerance=tolerance, position_tolerance=position_tolerance, rotation_tolerance=rot)
     except ValidationError as e:
         err = e.errors()[0]
         where = ".".join(str(x) for x in err["loc"] if not str(x).startswith(("function-", "literal[")))
-        _fail(f"goal{'.' + where if where else ''}: {err['msg']}")
+        _fail(f"goal{'.' + where if where else ''}: {str(err['msg']).removeprefix('Value error, ')}")
     with Progress(TextColumn("[bold]planning"), BarColumn(), TextColumn("{task.description}"),
                   TimeElapsedColumn(), console=err_console, transient=True) as bar:
         task = bar.add_task("", total=1.0)

@@ -95,3 +95,24 @@ def test_ctp_plan_and_simulate_document_their_exit_codes() -> None:
     for cmd in ("plan", "simulate"):
         r = CliRunner().invoke(app, [cmd, "--help"])
         assert r.exit_code == 0 and "Exit codes" in r.output and "3" in r.output, r.output
+
+
+def test_ctp_plan_displacement_goal_is_the_pose_it_leads_to(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """``--goal displacement``: lift by dz is the pose goal of the start pose raised by dz."""
+    out = tmp_path / "plan.json"
+    x, y, z = load_scene(BOX).object.pose.position
+    r = CliRunner().invoke(app, ["plan", str(BOX), "--goal", "displacement", "--displacement", "0 0 0.03 0 0 0",
+                                 "--time-limit", "1", "--out", str(out)])
+    assert r.exit_code in (0, 1), r.output
+    goal = json.loads(out.read_text())["goal"]
+    assert goal["type"] == "pose" and goal["pose"][3:] == [0.0, 0.0, 0.0], goal
+    assert abs(goal["pose"][0] - x) < 1e-12 and abs(goal["pose"][1] - y) < 1e-12
+    assert abs(goal["pose"][2] - (z + 0.03)) < 1e-12
+
+
+def test_ctp_plan_bad_displacements_exit_2() -> None:
+    base = ["plan", str(BOX), "--goal", "displacement"]
+    for extra, said in (([], "needs the field 'displacement'"), (["--displacement", "0 0 0.03"], "6 values"),
+                        (["--displacement", "0 x"], "not a list of numbers")):
+        r = CliRunner().invoke(app, [*base, *extra])
+        assert r.exit_code == 2 and said in r.output and "Traceback" not in r.output, (extra, r.output)
