@@ -81,6 +81,12 @@ class PlanCreate(_In):
     goal: Goal
     time_limit: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
         None, description="seconds; default and maximum: the server's job_time_limit")
+    replay: Annotated[bool, Field(strict=True)] = Field(
+        False, description="true: after planning, the job replays the plan in one continuous MuJoCo "
+                           "simulation (as `ctp simulate`) within what is left of the time limit; the result's "
+                           "`replay` holds the simulated object path, each step's planned and simulated "
+                           "displacements, the final position (m) and rotation (rad) errors and whether the "
+                           "object was dropped, or the replay's own failure")
 
 
 class EnumerationCreate(_In):

@@ -87,17 +87,77 @@ def run_enumeration(payload: dict[str, Any], progress: Progress | None = None) -
             "elapsed_seconds": time.perf_counter() - t0}
 
 
+#: with ``replay``: the share of the job's time limit the search may use (the replay has the rest)
+REPLAY_PLAN_SHARE = 0.75
+#: with ``replay``: seconds of the time limit kept free after the replay (result written, worker reply)
+REPLAY_MARGIN = 1.0
+#: units of the replay's figures in a plan result (``replay.units``)
+REPLAY_UNITS = {"position_error": "m", "rotation_error": "rad", "planned_translation": "m",
+                "planned_rotation": "rad", "position_scale": "m", "rotation_scale": "rad",
+                "relative_position_error": "1", "relative_rotation_error": "1", "duration": "s (simulated)",
+                "object_path.times": "s (simulated)",
+                "poses": "pose vectors: 2-D (x [m], y [m], theta [rad]); 3-D (p [m], rotation vector [rad])",
+                "max_regrasp_deviation": "m (|dp| + object size * |dtheta|)", "tracking_error": "rad"}
+
+
 def run_plan(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
-    """A plan from the scene's grasp to the goal (``planner.plan``)."""
+    """A plan from the scene's grasp to the goal (``planner.plan``); with ``replay``, then its
+    continuous MuJoCo replay (:func:`_replay`, the result's ``replay``)."""
     from planner import Goal, plan  # on a worker's first plan only (see the module docstring)
 
     t0 = time.perf_counter()
     scene = scene_from_dict(payload["scene"])
     goal = Goal.model_validate(payload["goal"])
-    result = plan(scene, goal, progress=progress, time_limit=payload.get("time_limit"))
+    limit = payload.get("time_limit")
+    replay = bool(payload.get("replay"))
+    search_limit = limit * REPLAY_PLAN_SHARE if (replay and limit is not None) else limit
+    on_search = progress
+    if replay and progress is not None:
+        def on_search(frac: float, message: str) -> None:
+            progress(REPLAY_PLAN_SHARE * frac, message)
+    result = plan(scene, goal, progress=on_search, time_limit=search_limit)
     out: dict[str, Any] = result.to_json()
     out.setdefault("elapsed_seconds", time.perf_counter() - t0)
+    if replay:
+        left = None if limit is None else limit - (time.perf_counter() - t0) - REPLAY_MARGIN
+        if progress is not None:
+            progress(REPLAY_PLAN_SHARE, "replaying the plan in MuJoCo")
+        out["replay"] = _replay(scene, out, left)
     return out
+
+
+def _replay(scene: Any, plan_json: dict[str, Any], time_limit: float | None) -> dict[str, Any]:
+    """The plan's continuous MuJoCo replay (:func:`sim.plan_replay.simulate_plan` of the plan's JSON
+    form, as ``ctp simulate`` runs a plan file) within ``time_limit`` seconds, as JSON:
+    ``status`` ``"done"`` with every figure of ``PlanSimulation.to_json`` (``ok``, ``dropped``,
+    ``drop_reason``, position and rotation errors, per-step ``planned`` and ``simulated``, the
+    sampled ``object_path``), ``summary`` (the errors in words with units) and ``units``;
+    ``"skipped"`` when there is nothing to replay (no plan, or no steps); ``"failed"`` with the
+    replay's ``error`` (out of time, a plan that does not fit its scene): the plan itself stands."""
+    base: dict[str, Any] = {"units": REPLAY_UNITS}
+    if not plan_json.get("found"):
+        return {**base, "status": "skipped", "error": None, "reason": "no plan was found: nothing to replay"}
+    if not plan_json.get("steps"):
+        return {**base, "status": "skipped", "error": None,
+                "reason": "the start already meets the goal: the plan has no steps to replay"}
+    if time_limit is not None and time_limit <= 0:
+        return {**base, "status": "failed", "error": "time limit: planning used the job's time limit, none was "
+                                                     "left for the replay (time_limit)"}
+    from analysis.exceptions import CTPError
+    from sim.plan_replay import simulate_plan  # MuJoCo: on a worker's first replay only
+
+    t0 = time.perf_counter()
+    try:
+        sim = simulate_plan(scene, plan_json, time_limit=time_limit)
+    except CTPError as e:
+        return {**base, "status": "failed", "error": f"{type(e).__name__}: {e}",
+                "elapsed_seconds": time.perf_counter() - t0}
+    except Exception as e:  # reported in the result, never silently: the plan is still returned
+        return {**base, "status": "failed", "error": f"internal error in the replay ({type(e).__name__}: {e})",
+                "elapsed_seconds": time.perf_counter() - t0}
+    return {**base, "status": "done", "error": None, **sim.to_json(),
+            "summary": ("dropped: " + sim.drop_reason) if sim.dropped else sim.error.describe(sim.tolerance),
+            "elapsed_seconds": time.perf_counter() - t0}
 
 
 def run_geometry(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:

@@ -27,7 +27,11 @@ At every moment each finger is either
 
 * **torque-controlled** (it has a contact in the planned state of that moment): its motors
   apply the entries of the current torque ``tau`` ``(M,)`` (scene joint order), the paper's
-  model of a grasp (eq. 18 holding, eq. 32 moving); or
+  model of a grasp (eq. 18 holding, eq. 32 moving); with ``options.posture_rate > 0``, during
+  object motions, plus a posture torque on the hand's self-motion only (joint motions that move
+  no kept contact point: :func:`sim.torque_replay.self_motion_torque`), which a redundant arm
+  needs (the Panda's forearm push: under constant torques its elbow swings out of its plane after
+  about 6 cm) and which is zero on the planned path; or
 * **driven** (it has no contact: it is moving to or from the object along its planned joint
   path, or waiting): it follows the planned joint waypoints *kinematically*. Before every
   MuJoCo step its joints' ``qpos`` is set to the path at ``t``, ``qvel`` to the path's velocity
@@ -103,11 +107,18 @@ translates judges its rotation error against ``t / s``, one that only rotates it
 against ``theta s``, and a plan that does not move the object at all against 1 % of its size).
 The replay is within ``tolerance`` when neither relative error exceeds it (and nothing was
 dropped); ``ctp simulate`` exits with code 3 otherwise.
+
+The object's path is recorded along the run (:class:`ObjectPath`, ``PlanSimulation.object_path``):
+its pose vector every ``options.path_interval`` simulated seconds (5 ms) and at the end of the
+start ramp and of every step, each sample tagged with its step, so the dashboard can draw it over
+the planned ``object_path`` and each step's ``simulated`` displacement is the difference of its
+last sample and the last sample before the step.
 """
 
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -116,7 +127,7 @@ import mujoco
 import numpy as np
 
 from analysis._types import Array
-from analysis.exceptions import SceneError
+from analysis.exceptions import SceneError, SolverTimeLimit
 from analysis.geometry import object_size
 from analysis.kinematics import HandKinematics
 from analysis.pose import Pose
@@ -138,7 +149,7 @@ from sim.mjcf import (
     reset_to_scene,
 )
 from sim.plan_paths import Mask, arc_fractions, driven_profile, interp_rows, move_time, path_deviation
-from sim.torque_replay import smooth_ramp
+from sim.torque_replay import self_motion_torque, smooth_ramp
 
 # --------------------------------------------------------------------------------------------
 # Options and results
@@ -158,6 +169,16 @@ class PlanSimulationOptions:
     motion_time: float = 2.0  # an object motion gives up after this long (then reported short)
     unloaded_time: float = 0.05  # no loaded contact for this long (while loaded) means dropped
     tolerance: float = 0.05  # relative position and rotation errors the replay must meet (PoseError)
+    path_interval: float = 0.005  # simulated seconds between two samples of the object path (ObjectPath)
+    #: 1/s; > 0 adds to the torque-controlled joints a posture torque on the hand's self-motion only
+    #: (:func:`sim.torque_replay.self_motion_torque`, gains ``posture_rate * b_q``: the self-motion
+    #: returns to the planned posture at this rate), which no contact force can balance and which
+    #: vanishes on the planned path; 0 (default): pure torque control, the paper's model
+    posture_rate: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not self.path_interval > 0:
+            raise ValueError(f"path_interval: must be positive (got {self.path_interval!r})")
 
 
 DEFAULT_OPTIONS = PlanSimulationOptions()
@@ -224,6 +245,37 @@ class PoseError:
 
 
 @dataclass(frozen=True)
+class ObjectPath:
+    """The simulated object pose along the replay, sampled every ``interval`` simulated seconds
+    (the first MuJoCo step at or after each multiple) and at the end of the start ramp and of
+    every step, so that the last sample of step ``k`` is the pose its ``simulated`` displacement
+    ends at and the last sample of the step before (or of the start ramp) the pose it starts from.
+
+    ``times`` ``(T,)`` simulated seconds from the start, non-decreasing; ``poses`` ``(T, D)`` pose
+    vectors (:meth:`analysis.pose.Pose.vector`: 2-D ``(x, y, theta)``, 3-D ``(p, rotation
+    vector)``, as the plan's ``object_path``); ``steps`` ``(T,)`` the index of the plan step
+    during which the sample was taken, ``-1`` for the start ramp (the first sample, at time 0,
+    is the start pose)."""
+
+    interval: float
+    times: Array  # (T,)
+    poses: Array  # (T, D)
+    steps: Array  # (T,) int
+
+    def of_step(self, index: int) -> Array:
+        """The samples of step ``index`` preceded by the last sample before it ``(k + 1, D)``:
+        the path from the pose the step starts at to the pose it ends at."""
+        sel = np.flatnonzero(self.steps == index)
+        if sel.size == 0:
+            return np.zeros((0, self.poses.shape[1]))
+        return np.asarray(self.poses[max(0, int(sel[0]) - 1): int(sel[-1]) + 1])
+
+    def to_json(self) -> dict[str, Any]:
+        return {"interval": self.interval, "times": self.times.tolist(), "poses": self.poses.tolist(),
+                "steps": [int(k) for k in self.steps]}
+
+
+@dataclass(frozen=True)
 class StepSimulation:
     """One step of the continuous replay."""
 
@@ -264,6 +316,7 @@ class PlanSimulation:
     drop_reason: str
     duration: float  # simulated seconds
     tolerance: float
+    object_path: ObjectPath  # the simulated object pose along the run, sampled
 
     @property
     def planned(self) -> Array:
@@ -313,7 +366,7 @@ class PlanSimulation:
             "simulated_final_pose": self.simulated_final_pose.tolist(),
             "max_regrasp_deviation": self.max_regrasp_deviation, "tracking_error": self.tracking_error,
             "object_size": self.object_size, "force_scale": self.force_scale, "duration": self.duration,
-            "steps": [s.to_json() for s in self.steps],
+            "steps": [s.to_json() for s in self.steps], "object_path": self.object_path.to_json(),
         }
 
 
@@ -351,6 +404,31 @@ class _Run:
         # per-step accumulators
         self.max_dev = 0.0
         self.track = 0.0
+        # the sampled object path (ObjectPath): times, pose vectors, step index (-1: start ramp)
+        self.step_index = -1
+        self.path_t: list[float] = [0.0]
+        self.path_pose: list[Array] = [self.pose().vector()]
+        self.path_step: list[int] = [-1]
+        self.next_sample = float(options.path_interval)
+        self.posture: Callable[[Array], Array] | None = None  # q (M,) -> self-motion torque (M,)
+        self.time_limit: float | None = None  # wall-clock seconds the run may take (simulate_plan)
+        self.deadline = math.inf  # time.monotonic() at which the run stops
+        self.mj_steps = 0
+
+    def sample(self) -> None:
+        """Record the object's pose now in the path (replacing a sample of the same step taken at
+        the same time; a step that took no time still gets its own sample)."""
+        if self.path_t[-1] == self.t and self.path_step[-1] == self.step_index:
+            self.path_pose[-1] = self.pose().vector()
+            return
+        self.path_t.append(self.t)
+        self.path_pose.append(self.pose().vector())
+        self.path_step.append(self.step_index)
+
+    def object_path(self) -> ObjectPath:
+        return ObjectPath(float(self.options.path_interval), np.array(self.path_t),
+                          np.array(self.path_pose).reshape(len(self.path_t), self.D),
+                          np.array(self.path_step, dtype=int))
 
     # -- state --------------------------------------------------------------------------------
 
@@ -394,6 +472,8 @@ class _Run:
             t = k * h
             tau = tau_of(t + 0.5 * h)
             ctrl = tau.copy()
+            if self.posture is not None:
+                ctrl[~driven] += self.posture(self.q())[~driven]
             if any_driven:
                 assert q_of is not None
                 q_now, q_next = q_of(t)[driven], q_of(t + h)[driven]
@@ -406,6 +486,14 @@ class _Run:
             d.xfrc_applied[self.obj_id] = self.w_on * self.xfrc
             mujoco.mj_step(m, d)
             self.t += h
+            self.mj_steps += 1
+            if self.mj_steps % 256 == 0 and time.monotonic() > self.deadline:
+                raise SolverTimeLimit("mujoco", f"the replay reached its time limit of {self.time_limit:.3g} s "
+                                                f"(wall clock) after {self.t:.3g} s of simulated time")
+            if self.t >= self.next_sample - 1e-12:
+                self.sample()
+                while self.next_sample <= self.t + 1e-12:
+                    self.next_sample += self.options.path_interval
             if any_driven:
                 self.track = max(self.track, float(np.max(np.abs(d.qpos[qa] - q_next))))
             self._monitor(planned_path, tau)
@@ -479,8 +567,13 @@ def simulate_plan(
     *,
     params: SimulationParams = DEFAULT_PARAMS,
     options: PlanSimulationOptions = DEFAULT_OPTIONS,
+    time_limit: float | None = None,
 ) -> PlanSimulation:
     """Replay a whole plan in one MuJoCo simulation (see the module docstring).
+
+    ``time_limit`` (wall-clock seconds, from the call): past it the run stops with
+    :class:`analysis.exceptions.SolverTimeLimit` (the service's plan jobs replay within what is
+    left of their own limit).
 
     ``plan``: a :class:`planner.plan.Plan` or its JSON form (``Plan.to_json()``, a ``ctp plan
     --out`` file, read by :meth:`Plan.from_json`); ``scene`` the scene it was planned from. A
@@ -496,7 +589,12 @@ def simulate_plan(
     steps = plan.steps
     torques = [t for st in steps for t in (st.transition.tau_stationary, st.transition.tau) if t is not None]
     tau_scale = max(torques, key=lambda t: float(np.max(np.abs(t)))) if torques else np.zeros(hand.M)
+    t_call = time.monotonic()
+    if time_limit is not None and not time_limit > 0:
+        raise SceneError(("time_limit",), f"must be positive (got {time_limit!r})")
     run = _Run(scene, hand, params, tau_scale, options)
+    if time_limit is not None:
+        run.time_limit, run.deadline = float(time_limit), t_call + float(time_limit)
     s, dim = run.s, scene.dim
     if run.pose().distance(Pose.from_vector(plan.start_pose, dim), s) > 1e-6 * s:
         raise SceneError(("start_pose",), "is not the scene's object pose: the plan was made for another scene")
@@ -514,6 +612,7 @@ def simulate_plan(
         run.ramp_to(hold0, first.object_path[:1], free0, first.q_path[0], wrench=True)
     except _Drop as e:
         dropped, reason = True, f"at the start: {e}"
+    run.sample()  # the pose the first step starts from
 
     for i, step in enumerate(steps):
         if dropped:
@@ -521,7 +620,8 @@ def simulate_plan(
         st = step.transition
         nxt = steps[i + 1].transition if i + 1 < len(steps) else None
         t0, pose0 = run.t, run.pose()
-        run.max_dev, run.track = 0.0, 0.0
+        run.max_dev, run.track, run.step_index = 0.0, 0.0, step.index
+        run.posture = None  # an object motion sets its own (options.posture_rate)
         planned = st.object_path[-1] - st.object_path[0]  # (D,)
         busy_before = _fingers_touching(hand, st.contacts_before)
         busy_after = _fingers_touching(hand, st.contacts_after)
@@ -566,11 +666,27 @@ def simulate_plan(
             tracking_error=run.track, joint_error=float(np.max(np.abs(run.q() - st.q_path[-1]))),
             duration=run.t - t0, dropped=dropped, note=note,
         ))
+        run.sample()  # the pose this step's simulated displacement ends at
     return PlanSimulation(
         steps=tuple(out), start_pose=plan.start_pose, planned_final_pose=plan.final_pose,
         simulated_final_pose=run.pose().vector(), object_size=s, force_scale=run.F, dropped=dropped,
-        drop_reason=reason, duration=run.t, tolerance=options.tolerance,
+        drop_reason=reason, duration=run.t, tolerance=options.tolerance, object_path=run.object_path(),
     )
+
+
+def _posture(run: _Run, hand: HandKinematics, step: PlanStep,
+             ref: Callable[[], Array]) -> Callable[[Array], Array] | None:
+    """The self-motion posture torque of an object motion (``options.posture_rate > 0``, else
+    ``None``): the finger contacts the step keeps (not D) held where they are, the hand pulled
+    along its self-motion towards ``ref()`` ``(M,)``, the planned configuration at the moment."""
+    rate = run.options.posture_rate
+    if not rate > 0:
+        return None
+    st = step.transition
+    points = [(ref_, c.point_body) for c, letter in zip(step.before.contacts, st.combination, strict=True)
+              if letter != "D" and (ref_ := hand.resolve_body(c.body)) is not None and ref_.finger is not None]
+    gains = rate * run.b_q
+    return lambda q: self_motion_torque(hand, points, q, ref(), gains)
 
 
 def _object_motion(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, step: PlanStep,
@@ -584,6 +700,7 @@ def _object_motion(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, st
     dist = float(np.linalg.norm(st.object_path[-1] - st.object_path[0]))
     frac_obj = arc_fractions(st.object_path)
     progress = {"u": 0.0, "prev": 0.0, "v": 0.0, "reached": 0.0}
+    run.posture = _posture(run, hand, step, lambda: interp_rows(st.q_path, frac_obj, progress["u"]))
 
     def q_of(t: float) -> Array:  # free fingers follow the object's progress
         return interp_rows(st.q_path, frac_obj, progress["u"])
@@ -620,6 +737,7 @@ def _object_motion(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, st
 
 __all__ = [
     "DEFAULT_OPTIONS",
+    "ObjectPath",
     "PlanSimulation",
     "PlanSimulationOptions",
     "PoseError",

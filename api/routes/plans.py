@@ -33,14 +33,19 @@ def create_plan(raw: Annotated[PlanCreate, SkipValidation], settings: SettingsDe
                        errors=[{"loc": ["goal", "combination"], "msg": "one letter per contact",
                                 "type": "value_error"}])
     check_combination(body.goal, body.scene)  # letters that fit each contact's friction (SceneError: 422)
-    if body.goal.pose is not None and len(body.goal.pose) != body.scene.D:
-        raise ApiError(422, f"goal.pose: has {len(body.goal.pose)} values; a {body.scene.dim}-D object needs "
-                            f"{body.scene.D}",
-                       errors=[{"loc": ["goal", "pose"], "msg": f"needs {body.scene.D} values", "type": "value_error"}])
+    for name in ("pose", "displacement"):  # pose vectors of the scene's dimension, checked before queueing
+        vec = getattr(body.goal, name)
+        if vec is not None and len(vec) != body.scene.D:
+            raise ApiError(422, f"goal.{name}: has {len(vec)} values; a {body.scene.dim}-D object needs "
+                                f"{body.scene.D}",
+                           errors=[{"loc": ["goal", name], "msg": f"needs {body.scene.D} values",
+                                    "type": "value_error"}])
     _check_wrenches(body.goal.wrenches, body.scene.D, body.scene.dim)
     limit = _jobs.time_limit(body.time_limit, settings.job_time_limit)
     request = {"scene": body.scene.model_dump(mode="json"), "goal": body.goal.model_dump(mode="json"),
                "time_limit": limit}
+    if body.replay:
+        request["replay"] = True  # only when asked: other requests keep their stored form
     job = _jobs.submit(store, runner, KIND, request)
     response.headers["Location"] = f"/plans/{job.id}"
     return _jobs.public(job, "/plans")
@@ -68,7 +73,10 @@ def get_plan_result(plan_id: str, store: StoreDep) -> dict[str, Any]:
     ``found``, ``outcome`` and ``reason``. A job that ran to its end succeeded whether or not a plan
     was found: a plan that was not found has ``found: false``, ``outcome: "no_plan"``, no steps and
     a ``reason`` naming what blocked it; a start that already meets the goal has ``found: true``,
-    ``outcome: "start_meets_goal"`` and no steps; otherwise ``outcome: "reached"``."""
+    ``outcome: "start_meets_goal"`` and no steps; otherwise ``outcome: "reached"``. A plan asked
+    with ``replay: true`` also has ``replay``: ``status`` ``done`` (the MuJoCo replay's object
+    path, per-step planned and simulated displacements, position error in m and rotation error in
+    rad, ``dropped``), ``skipped`` (nothing to replay) or ``failed`` (its ``error``; the plan stands)."""
     return _jobs.result(store, KIND, plan_id, WHAT)
 
 

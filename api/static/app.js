@@ -1,7 +1,7 @@
 // Dashboard of the contact-state transition planner. Plain ES modules, no build step, no downloads:
 // 2-D scenes drawn in SVG, 3-D scenes in WebGL (view3d.js: three.js and urdf-loader, vendored).
 
-import { COLORS, SceneView3D, interpolatePose3, formatLength } from "./view3d.js";
+import { COLORS, PATH_COLORS, SceneView3D, interpolatePose3, formatLength } from "./view3d.js";
 
 const $ = (id) => document.getElementById(id);
 const SVGNS = "http://www.w3.org/2000/svg";
@@ -11,7 +11,7 @@ const state = {
   scene: null, geometry: null, rows: [], filtered: [], page: 0, combination: null, report: null,
   dafcView: { yaw: -0.7, pitch: 0.5 }, dafcPick: null,
   extraBounds: [], job: null, pollTimer: null, plan: null, frames: [], frameIndex: 0, playTimer: null,
-  view3d: null, sceneToken: 0, robot: null,
+  view3d: null, sceneToken: 0, robot: null, replay: null,
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -157,6 +157,7 @@ function currentView() {
     fingers: f ? f.fingers : state.geometry.frames[0].fingers,
     q: f ? f.q : state.geometry.frames[0].q,
     pose: f ? f.pose : null,
+    ghost: f ? replayPoseAt(f) : null,
     contacts, stateOf,
   };
 }
@@ -219,6 +220,24 @@ function drawScene2D() {
       el(svg, "circle", { cx: a[0], cy: a[1], r: 4, fill: "#fff", stroke: "#222" });
     }
   }
+  // the planned object path and the MuJoCo replay's, and the object where MuJoCo had it (ghost)
+  if (state.plan && state.frames.length) {
+    const planned = plannedObjectPath(state.plan);
+    if (planned.length) el(svg, "polyline", { points: pts(planned.map((p) => proj(p.slice(0, 2)))), fill: "none", stroke: PATH_COLORS.planned, "stroke-width": 2, "stroke-dasharray": "5 3", class: "planned-path", "data-points": planned.length });
+    if (state.replay) {
+      el(svg, "polyline", { points: pts(state.replay.poses.map((p) => proj(p.slice(0, 2)))), fill: "none", stroke: PATH_COLORS.replay, "stroke-width": 2, class: "replay-path", "data-points": state.replay.poses.length });
+      if (view.ghost) {
+        const gf = frameOf(scene, view.ghost), go = outline2D(scene.object.shape, (v) => toWorld(scene, gf, v));
+        const g = el(svg, "g", { class: "replay-ghost", "data-pose": view.ghost.map((x) => x.toFixed(6)).join(" ") });
+        for (const [c, r, mark] of go.circles) {
+          const q = proj(c);
+          el(g, "circle", { cx: q[0], cy: q[1], r: r * proj.scale, fill: "none", stroke: PATH_COLORS.replay, "stroke-dasharray": "4 3", "stroke-width": 1.5 });
+          if (mark) { const m = proj(mark); el(g, "line", { x1: q[0], y1: q[1], x2: m[0], y2: m[1], stroke: PATH_COLORS.replay }); }
+        }
+        for (const l of go.lines) el(g, "polyline", { points: pts(l.map(proj)), fill: "none", stroke: PATH_COLORS.replay, "stroke-dasharray": "4 3", "stroke-width": 1.5 });
+      }
+    }
+  }
   view.contacts.forEach((c) => {
     const p = c.point, q = proj(p), s = c.state;
     const color = s && COLORS[s] ? COLORS[s] : "#e76f51";
@@ -250,6 +269,8 @@ function detachJob() {
   // the job keeps running on the server, but its result no longer belongs to what is shown
   stopPolling(); stopPlaying();
   state.job = null; state.plan = null; state.frames = []; state.frameIndex = 0; state.extraBounds = [];
+  state.replay = null; showReplay(null);
+  if (state.view3d) state.view3d.setPaths(null, null);
   $("job-status").textContent = "no job"; delete $("job-status").dataset.status; delete $("job-status").dataset.jobId;
   $("job-progress").value = 0; $("cancel-btn").disabled = true; $("steps").innerHTML = "";
   $("contact-states").innerHTML = ""; $("torque-bars").innerHTML = ""; $("player").hidden = true;
@@ -494,7 +515,9 @@ async function startJob(kind) {
   detachJob();
   drawScene();  // the scene as given again, not the last plan's frame
   const scene = state.scene;
-  const body = kind === "plan" ? { scene, goal: { type: $("goal-select").value } } : { scene };
+  const type = $("goal-select").value;
+  const goal = type === "combination" ? { type, combination: $("goal-combination").value.trim() } : { type };
+  const body = kind === "plan" ? { scene, goal, ...($("replay-check").checked ? { replay: true } : {}) } : { scene };
   try {
     const job = await api("POST", kind === "plan" ? "/plans" : "/enumerations", body);
     if (state.scene !== scene) return;  // the scene changed while the job was being created
@@ -645,7 +668,7 @@ function planFrames(scene, plan) {
       return { body: t.body, point: toWorld(scene, fr, local), normal: ln ? dirToWorld(scene, fr, ln) : null,
                half_angle: Math.atan(m), state: letter, label: i == null ? "·" : String(i) };
     });
-    return { index, step: f.st.k, q: f.q, pose: f.pose, waypoint: f.waypoint, contacts,
+    return { index, step: f.st.k, progress: f.progress, q: f.q, pose: f.pose, waypoint: f.waypoint, contacts,
              combination: f.st.step.combination, torques: (f.st.step.torques && f.st.step.torques.chosen) || [] };
   });
 }
@@ -653,14 +676,23 @@ function planFrames(scene, plan) {
 async function loadPlan(plan, scene) {
   if (state.scene !== scene) return;
   state.plan = plan;
+  state.replay = replayOf(plan);
+  showReplay(plan);
   const steps = $("steps"); steps.innerHTML = "";
   $("player").hidden = false;
   plan.steps.forEach((s, k) => {
     const li = document.createElement("li"), b = document.createElement("button");
     b.textContent = `${s.kind} · ${s.combination} · ${(s.joint_path || []).length} waypoints`;
     b.title = "show this step";
+    const rs = plan.replay && plan.replay.status === "done" ? (plan.replay.steps || []).find((x) => x.index === k) : null;
+    if (rs) {
+      const note = document.createElement("div");
+      note.className = "small muted replay-step";
+      note.textContent = stepMotionText(scene, rs) + (rs.dropped ? " — dropped here" : "");
+      li.appendChild(note);
+    }
     b.addEventListener("click", () => { stopPlaying(); const i = state.frames.findIndex((f) => f.step === k); if (i >= 0) setFrame(i); });
-    li.appendChild(b);
+    li.prepend(b);
     steps.appendChild(li);
   });
   let frames = [];
@@ -681,6 +713,9 @@ async function loadPlan(plan, scene) {
     const all = [...state.extraBounds, ...state.geometry.contacts.map((c) => c.point)];
     const L = 0.12 * Math.max(...all.map((p) => norm(sub(p, all[0]))), 1e-3);
     for (const f of state.frames) for (const c of f.contacts) if (c.normal) state.extraBounds.push(sub(c.point, mul(c.normal, 1.5 * L)));
+    if (state.replay) for (const p of state.replay.poses) state.extraBounds.push(p.slice(0, 2));
+  } else if (state.view3d && state.frames.length) {
+    state.view3d.setPaths(plannedObjectPath(plan), state.replay ? state.replay.poses : null);
   }
   $("frame-slider").max = Math.max(0, state.frames.length - 1);
   $("player").hidden = plan.steps.length === 0;  // nothing to play
@@ -698,6 +733,7 @@ function setFrame(i) {
   const cs = $("contact-states"); cs.innerHTML = "";
   if (f) for (const c of f.contacts) { const span = document.createElement("span"); span.className = `chip ${c.state}`; span.textContent = `${c.label} ${c.body}: ${c.state}`; cs.appendChild(span); }
   drawTorques(f ? f.torques : []);
+  drawPathInset(f);
   drawScene();
 }
 
@@ -720,6 +756,98 @@ function drawTorques(tau) {
     el(svg, "text", { x: lx, y: ly, "font-size": 9, transform: `rotate(60 ${lx} ${ly})`, class: "joint-name" }, names[j] || String(j));
   });
   void top;
+}
+
+// ---------------------------------------------------------------------------------------------
+// the MuJoCo replay of a plan (POST /plans with replay: the result's "replay")
+
+/** The plan's object path (pose vectors): its start pose, then every step's object_path. */
+function plannedObjectPath(plan) {
+  const out = plan.start_pose ? [plan.start_pose] : [];
+  for (const s of plan.steps) for (const p of s.object_path || []) out.push(p);
+  return out;
+}
+
+/** The replay's sampled object path and, for each step k, the samples from the last one before
+ * the step to its last one ({from, to}), or null when the result has no replay that ran. */
+function replayOf(plan) {
+  const r = plan.replay;
+  if (!r || r.status !== "done" || !r.object_path || !r.object_path.poses.length) return null;
+  const { poses, steps } = r.object_path, seg = new Map();
+  steps.forEach((k, i) => {
+    const s = seg.get(k);
+    if (s) s.to = i; else seg.set(k, { from: Math.max(0, i - 1), to: i });
+  });
+  return { poses, steps, seg, last: steps[steps.length - 1] };
+}
+
+/** The simulated object pose of a player frame: the replay's sample at the same fraction of the
+ * frame's step; after the step the replay stopped in (dropped), its last pose. */
+function replayPoseAt(frame) {
+  const r = state.replay;
+  if (!r) return null;
+  const s = r.seg.get(frame.step);
+  if (!s) return frame.step > r.last ? r.poses[r.poses.length - 1] : null;
+  const u = Math.max(0, Math.min(1, frame.progress ?? 1));
+  return r.poses[s.from + Math.round(u * (s.to - s.from))];
+}
+
+function fmtSI(x, unit) {
+  const a = Math.abs(x);
+  return `${a === 0 ? "0" : a >= 1e-3 && a < 1e4 ? x.toPrecision(3) : x.toExponential(2)} ${unit}`;
+}
+
+/** Planned and simulated motion of one step in words: translation (m) and rotation (rad) apart. */
+function stepMotionText(scene, s) {
+  const d = scene.dim === 2 ? 2 : 3;
+  const part = (v) => `${fmtSI(norm(v.slice(0, d)), "m")}, ${fmtSI(norm(v.slice(d)), "rad")}`;
+  return `MuJoCo moved ${part(s.simulated)} (planned ${part(s.planned)})`;
+}
+
+/** The replay's outcome in words, with units, under the player (hidden without a replay). */
+function showReplay(plan) {
+  const panel = $("replay-panel"), info = $("replay-info");
+  const r = plan ? plan.replay : null;
+  panel.hidden = !r; info.textContent = ""; delete info.dataset.status;
+  if (!r) return;
+  info.dataset.status = r.status;
+  $("path-legend").hidden = r.status !== "done";
+  $("path-inset").style.display = r.status === "done" ? "" : "none";
+  if (r.status === "failed") { info.textContent = `MuJoCo replay failed: ${r.error} (the plan itself stands)`; return; }
+  if (r.status === "skipped") { info.textContent = `MuJoCo replay: ${r.reason}`; return; }
+  const pct = (x) => `${(100 * x).toFixed(1)} %`;
+  info.textContent = `MuJoCo replay (${r.object_path.times.length} samples over ${r.duration.toFixed(3)} s of simulated time): `
+    + `final position error ${fmtSI(r.position_error, "m")} (${pct(r.relative_position_error)} of ${fmtSI(r.position_scale, "m")}), `
+    + `rotation error ${fmtSI(r.rotation_error, "rad")} (${pct(r.relative_rotation_error)} of ${fmtSI(r.rotation_scale, "rad")}); `
+    + `object dropped: ${r.dropped ? "yes — " + r.drop_reason : "no"}; ${r.ok ? "within" : "NOT within"} the ${pct(r.tolerance)} tolerance.`;
+}
+
+/** The object paths zoomed to their own extent (they are often a few centimetres in a scene a
+ * metre across): planned (dashed) and MuJoCo, the current frame's planned and simulated object
+ * positions as dots; 3-D paths projected on the two world axes along which they spread most. */
+function drawPathInset(frame) {
+  const svg = $("path-inset"); svg.innerHTML = "";
+  if (!state.plan || !state.replay || !frame) return;
+  const W = 300, H = 200, M = 28, dim = state.scene.dim;
+  const planned = plannedObjectPath(state.plan), sim = state.replay.poses;
+  const all = [...planned, ...sim];
+  const spread = [0, 1, 2].slice(0, dim).map((i) => Math.max(...all.map((p) => p[i])) - Math.min(...all.map((p) => p[i])));
+  const axes = dim === 2 ? [0, 1] : [0, 1, 2].sort((a, b) => spread[b] - spread[a]).slice(0, 2).sort((a, b) => a - b);
+  const [ax, ay] = axes, names = ["x", "y", "z"];
+  const lo = axes.map((i) => Math.min(...all.map((p) => p[i]))), hi = axes.map((i) => Math.max(...all.map((p) => p[i])));
+  const span = Math.max(hi[0] - lo[0], hi[1] - lo[1], 1e-6);
+  const s = Math.min((W - 2 * M) / span, (H - 2 * M) / span);
+  const cx = (lo[0] + hi[0]) / 2, cy = (lo[1] + hi[1]) / 2;
+  const P = (p) => [W / 2 + (p[ax] - cx) * s, H / 2 - (p[ay] - cy) * s];
+  el(svg, "polyline", { points: pts(planned.map(P)), fill: "none", stroke: PATH_COLORS.planned, "stroke-width": 1.5, "stroke-dasharray": "5 3", class: "inset-planned", "data-points": planned.length });
+  el(svg, "polyline", { points: pts(sim.map(P)), fill: "none", stroke: PATH_COLORS.replay, "stroke-width": 1.5, class: "inset-replay", "data-points": sim.length });
+  if (frame.pose) { const q = P(frame.pose); el(svg, "circle", { cx: q[0], cy: q[1], r: 4, fill: PATH_COLORS.planned, class: "inset-now-planned" }); }
+  const g = replayPoseAt(frame);
+  if (g) { const q = P(g); el(svg, "circle", { cx: q[0], cy: q[1], r: 3, fill: PATH_COLORS.replay, class: "inset-now-replay" }); }
+  const bar = Math.pow(10, Math.floor(Math.log10(span * 0.5)));
+  el(svg, "line", { x1: 8, y1: H - 8, x2: 8 + bar * s, y2: H - 8, stroke: "#333", "stroke-width": 2 });
+  el(svg, "text", { x: 8, y: H - 12, "font-size": 10, fill: "#333" }, `${formatLength(bar)} · ${names[ax]} right, ${names[ay]} up [m]`);
+  el(svg, "text", { x: 8, y: 12, "font-size": 10, fill: "#333" }, "object position, zoomed: planned (dashed) and MuJoCo");
 }
 
 function stopPlaying() {
@@ -840,6 +968,7 @@ async function init() {
   $("page-prev").addEventListener("click", () => { state.page -= 1; renderTable(); });
   $("page-next").addEventListener("click", () => { state.page += 1; renderTable(); });
   $("plan-btn").addEventListener("click", () => startJob("plan"));
+  $("goal-select").addEventListener("change", () => { $("goal-combination").hidden = $("goal-select").value !== "combination"; });
   $("enum-btn").addEventListener("click", () => startJob("enumeration"));
   $("cancel-btn").addEventListener("click", cancelJob);
   $("play-btn").addEventListener("click", togglePlay);

@@ -9,6 +9,8 @@ import URDFLoader from "urdf-loader";
 
 export const COLORS = { F: "#2a9d8f", S: "#e9a03b", D: "#d1495b", N: "#577590" };
 export const BACKGROUND = 0xfbfcfd;
+/** Object paths in the plan player: the planned one and the MuJoCo replay's (index.html's legend). */
+export const PATH_COLORS = { planned: "#1d3557", replay: "#c2185b" };
 const LINK_GREY = 0x8a94a0, MESH_GREY = 0xb8c0ca, OBJECT_BLUE = 0x7fa8d8;
 const ERD_PREFIX = "example-robot-data:", ROBOT_PREFIX = "robot:";
 
@@ -201,6 +203,9 @@ export class SceneView3D {
     this.generation += 1;
     for (const c of [...this.root.children]) { this.root.remove(c); disposeTree(c); }
     this.robots = []; this.capsules = {}; this.contactGroup = null; this.objectGroup = null;
+    this.pathGroup = null; this.ghost = null;
+    delete this.container.dataset.replayPoints; delete this.container.dataset.plannedPoints;
+    delete this.container.dataset.ghost;
     this.container.dataset.meshes = "0";
     delete this.container.dataset.robots;
   }
@@ -432,7 +437,54 @@ export class SceneView3D {
       });
     }
     this.drawContacts(frame.contacts || []);
+    if (this.ghost) {  // the object where MuJoCo had it at this frame
+      this.ghost.visible = !!frame.ghost;
+      if (frame.ghost) { this.ghost.matrix.copy(objectMatrix(scene, frame.ghost)); this.ghost.matrixWorldNeedsUpdate = true; }
+      this.container.dataset.ghost = frame.ghost ? frame.ghost.map((x) => x.toFixed(6)).join(" ") : "";
+    }
     this.container.dataset.frame = String(frame.index ?? 0);
+    this.render();
+  }
+
+  /** The planned object path and the MuJoCo replay's (lists of pose vectors; only their
+   * positions are drawn: a line through the samples and a dot at each, seen through the object
+   * and links), and a ghost of the object for the replay's pose of each frame (``update``'s
+   * ``frame.ghost``). ``null`` removes a path; without a replay there is no ghost. */
+  setPaths(planned, replay) {
+    if (this.pathGroup) { this.root.remove(this.pathGroup); disposeTree(this.pathGroup); }
+    if (this.ghost) { this.root.remove(this.ghost); disposeTree(this.ghost); }
+    this.pathGroup = null; this.ghost = null;
+    delete this.container.dataset.replayPoints; delete this.container.dataset.plannedPoints;
+    delete this.container.dataset.ghost;
+    if (!this.sceneData) return;
+    this.pathGroup = new THREE.Group();
+    this.pathGroup.name = "paths";
+    const line = (poses, color, name, dashed) => {
+      const geom = new THREE.BufferGeometry().setFromPoints(poses.map((p) => v3(p)));
+      const mat = dashed
+        ? new THREE.LineDashedMaterial({ color, dashSize: this.size * 0.01, gapSize: this.size * 0.006, depthTest: false, transparent: true })
+        : new THREE.LineBasicMaterial({ color, depthTest: false, transparent: true });
+      const l = new THREE.Line(geom, mat);
+      if (dashed) l.computeLineDistances();
+      l.name = name; l.renderOrder = 6;
+      const dots = new THREE.Points(geom, new THREE.PointsMaterial({ color, size: dashed ? 3 : 4, sizeAttenuation: false, depthTest: false, transparent: true }));
+      dots.name = `${name}:points`; dots.renderOrder = 6;
+      this.pathGroup.add(l, dots);
+    };
+    if (planned && planned.length) { line(planned, PATH_COLORS.planned, "path:planned", true); this.container.dataset.plannedPoints = String(planned.length); }
+    if (replay && replay.length) {
+      line(replay, PATH_COLORS.replay, "path:replay", false);
+      this.container.dataset.replayPoints = String(replay.length);
+      // a wireframe, so the planned object keeps its colour under it
+      const mat = new THREE.MeshBasicMaterial({ color: PATH_COLORS.replay, wireframe: true, transparent: true, opacity: 0.16, depthWrite: false });
+      const g = new THREE.Group();
+      const m = shapeMesh(this.sceneData.object.shape, mat, PATH_COLORS.replay);
+      if (m) g.add(m);
+      g.name = "ghost:replay"; g.matrixAutoUpdate = false; g.visible = false;
+      this.ghost = g;
+      this.root.add(g);
+    }
+    this.root.add(this.pathGroup);
     this.render();
   }
 

@@ -294,6 +294,12 @@ def test_plan_goal_validation(client: TestClient) -> None:
     assert r.status_code == 422 and r.json()["detail"].startswith("goal.combination:")
     r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "pose", "pose": [0, 0, 0, 0, 0, 0]}})
     assert r.status_code == 422 and r.json()["detail"].startswith("goal.pose:")
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "displacement",
+                                                               "displacement": [0, 0.1, 0, 0, 0, 0]}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("goal.displacement:"), r.text
+    assert r.json()["errors"][0]["loc"] == ["goal", "displacement"]
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "displacement"}})
+    assert r.status_code == 422 and "displacement" in r.json()["detail"], r.text
     r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}, "time_limit": 1e9})
     assert r.status_code == 422 and r.json()["detail"].startswith("time_limit")
 

@@ -437,3 +437,151 @@ def test_an_uploaded_robot_is_placed_and_drawn(tmp_path: Path) -> None:
             ctx.close()
     finally:
         stop_server(server)
+
+
+# the three.js objects of the player's object paths and ghost, read from the scene graph
+READ_PATHS = """() => {
+    const view = window.ctpDashboard.view3d();
+    const find = (name) => view.root.getObjectByName(name);
+    const pos = (o) => (o ? Array.from(o.geometry.attributes.position.array) : null);
+    const ghost = find("ghost:replay");
+    return { replay: pos(find("path:replay")), planned: pos(find("path:planned")),
+             ghost: ghost ? { visible: ghost.visible, matrix: ghost.matrix.toArray() } : null };
+}"""
+
+# pixels of the 3-D canvas near the MuJoCo path colour (#c2185b), and a hash of the whole canvas
+COUNT_REPLAY_PIXELS = """() => {
+    const view = window.ctpDashboard.view3d();
+    view.renderNow();
+    const c = document.createElement("canvas");
+    c.width = view.canvas.width; c.height = view.canvas.height;
+    const g = c.getContext("2d");
+    g.drawImage(view.canvas, 0, 0);
+    const px = g.getImageData(0, 0, c.width, c.height).data;
+    let n = 0, h = 0;
+    for (let i = 0; i < px.length; i += 4) {
+        if (Math.abs(px[i] - 0xc2) + Math.abs(px[i + 1] - 0x18) + Math.abs(px[i + 2] - 0x5b) < 60) n += 1;
+        h = (h * 31 + px[i] + 7 * px[i + 1] + 13 * px[i + 2]) % 1000000007;
+    }
+    return { replay: n, hash: h };
+}"""
+
+
+@pytest.mark.slow
+def test_a_replayed_3d_plan_plays_with_the_mujoco_path(tmp_path: Path) -> None:
+    """A 3-D plan asked with the MuJoCo replay (the sphere example to active closure: five steps,
+    the last lifts the sphere 2 cm off the palm; 20-60 s to plan on 2 shared cores, 5 s of CPU to
+    replay): the MuJoCo object path is a three.js line of as many points as the result's sampled
+    path, at its positions; the ghost follows the frames; the animation advances and changes the
+    picture; the errors are shown with units; then the planar plan to active closure, whose lift
+    the SVG view draws planned and simulated. (The only quicker 3-D plan found, goal FFFDF, is one
+    release step of two frames in which the sphere moves by 1e-5 m: nothing to see.)"""
+    if not CHROMIUM.exists():
+        pytest.skip("no /usr/bin/chromium: install Debian's chromium (apt-get install chromium) to run the "
+                    "browser test")
+    import numpy as np
+    from playwright.sync_api import expect, sync_playwright
+
+    port = free_port()
+    base = f"http://127.0.0.1:{port}"
+    server = start_server(tmp_path, port)
+    profile = tmp_path / "chromium-profile"
+    try:
+        with sync_playwright() as pw:
+            ctx = _chromium(pw, profile)
+            blocked = _only_this_server(ctx, base)
+            page = ctx.pages[0] if ctx.pages else ctx.new_page()
+            errors: list[str] = []
+            page.on("pageerror", lambda e: errors.append(str(e)))
+            page.goto(f"{base}/")
+            expect(page.locator("body[data-ready='1']")).to_have_count(1, timeout=30_000)
+            page.select_option("#example-select", "sphere_four_finger_palm.json")
+            expect(page.locator("#scene-info")).to_contain_text("3-D", timeout=30_000)
+            expect(page.locator("body[data-scene-ready='1']")).to_have_count(1, timeout=60_000)
+            expect(page.locator("#goal-combination")).to_be_hidden()
+            page.select_option("#goal-select", "combination")
+            expect(page.locator("#goal-combination")).to_be_visible()
+            page.select_option("#goal-select", "active")
+            page.check("#replay-check")
+            page.click("#plan-btn")
+            expect(page.locator("#job-status[data-status='succeeded']")).to_have_count(1, timeout=400_000)
+            expect(page.locator("#player[data-frames]")).to_have_count(1, timeout=60_000)
+            job_id = page.locator("#job-status").get_attribute("data-job-id")
+            result = page.request.get(f"{base}/plans/{job_id}/result").json()
+            rep = result["replay"]
+            assert rep["status"] == "done" and not rep["dropped"], rep.get("error")
+            poses = np.asarray(rep["object_path"]["poses"])  # (T, 6)
+            # the replay's outcome in words, with units
+            expect(page.locator("#replay-panel")).to_be_visible()
+            info = page.locator("#replay-info").inner_text()
+            assert f"{len(poses)} samples" in info and "object dropped: no" in info, info
+            assert " m (" in info and " rad (" in info and "within the 5.0 % tolerance" in info, info
+            legend = page.locator("#path-legend").inner_text()
+            assert "planned object path" in legend and "MuJoCo object path" in legend
+            assert "MuJoCo moved" in page.locator("#steps li .replay-step").first.inner_text()
+            # the three.js scene: the MuJoCo path has one point per sample, at the sample's position
+            drawn = page.evaluate(READ_PATHS)
+            pts = np.asarray(drawn["replay"]).reshape(-1, 3)
+            assert pts.shape == (len(poses), 3)
+            np.testing.assert_allclose(pts, poses[:, :3], atol=1e-6)  # float32 buffer of metres
+            planned = [result["start_pose"], *[p for s in result["steps"] for p in s["object_path"]]]
+            np.testing.assert_allclose(np.asarray(drawn["planned"]).reshape(-1, 3),
+                                       np.asarray(planned)[:, :3], atol=1e-6)
+            assert drawn["ghost"] is not None and drawn["ghost"]["visible"]
+            # ghost at frame 0: where step 0 starts in MuJoCo, the last sample of the start ramp
+            # (the object settled under the holding torque, a few micrometres below the scene's pose)
+            first = rep["object_path"]["steps"].index(0)
+            assert rep["object_path"]["steps"][first - 1] == -1
+            np.testing.assert_allclose(np.asarray(drawn["ghost"]["matrix"])[12:15], poses[first - 1, :3], atol=1e-6)
+            assert page.locator("#scene-3d").get_attribute("data-replay-points") == str(len(poses))
+            # the zoomed inset: both paths (the lift is 2 cm, a few pixels in the 3-D view) and both dots
+            assert page.locator("#path-inset polyline.inset-replay").get_attribute("data-points") == str(len(poses))
+            assert page.locator("#path-inset polyline.inset-planned").get_attribute("data-points") == str(len(planned))
+            assert page.locator("#path-inset circle.inset-now-replay").count() == 1
+            assert "z up [m]" in (page.locator("#path-inset").text_content() or "")  # the lift is vertical
+            px0 = page.evaluate(COUNT_REPLAY_PIXELS)
+            assert px0["replay"] > 0, px0  # the MuJoCo path's dots and the ghost are on the canvas
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.locator("#scene-3d").screenshot(path=str(ARTIFACTS / "dashboard-3d-replay-frame0.png"))
+            # play: the frames advance, the finger moves (the canvas changes), the ghost follows
+            n_frames = int(page.locator("#player").get_attribute("data-frames") or 0)
+            assert n_frames > 2
+            page.click("#play-btn")
+            page.wait_for_function("Number(document.querySelector('#player').dataset.frame) >= "
+                                   f"{n_frames - 1}", timeout=60_000)
+            last = page.evaluate(COUNT_REPLAY_PIXELS)
+            assert last["hash"] != px0["hash"]
+            ghost = [float(x) for x in (page.locator("#scene-3d").get_attribute("data-ghost") or "").split()]
+            np.testing.assert_allclose(ghost[:3], poses[-1, :3], atol=1e-6)  # the last frame: the final pose
+            page.locator("#scene-3d").screenshot(path=str(ARTIFACTS / "dashboard-3d-replay-last.png"))
+            page.locator("#plan-panel").screenshot(path=str(ARTIFACTS / "dashboard-3d-replay-player.png"))
+            # a 2-D plan with its replay: the lift drawn planned (dashed) and simulated, and a ghost
+            page.select_option("#example-select", "planar_disk_envelope.json")
+            expect(page.locator("#scene-info")).to_contain_text("2-D", timeout=30_000)
+            expect(page.locator("#replay-panel")).to_be_hidden()
+            page.select_option("#goal-select", "active")
+            expect(page.locator("#goal-combination")).to_be_hidden()
+            page.click("#plan-btn")  # the box is still checked
+            expect(page.locator("#job-status[data-status='succeeded']")).to_have_count(1, timeout=180_000)
+            expect(page.locator("#player[data-frames]")).to_have_count(1, timeout=60_000)
+            job_id = page.locator("#job-status").get_attribute("data-job-id")
+            rep2 = page.request.get(f"{base}/plans/{job_id}/result").json()["replay"]
+            assert rep2["status"] == "done", rep2.get("error")
+            line = page.locator("#scene-view polyline.replay-path")
+            assert line.get_attribute("data-points") == str(len(rep2["object_path"]["poses"]))
+            assert page.locator("#scene-view polyline.planned-path").count() == 1
+            assert page.locator("#path-inset polyline.inset-replay").get_attribute("data-points") == str(
+                len(rep2["object_path"]["poses"]))
+            page.evaluate("window.ctpDashboard.setFrame(window.ctpDashboard.state.frames.length - 1)")
+            g = page.locator("#scene-view g.replay-ghost")
+            expect(g).to_have_count(1)
+            shown = [float(x) for x in (g.get_attribute("data-pose") or "").split()]
+            np.testing.assert_allclose(shown, rep2["simulated_final_pose"], atol=1e-6)  # the last frame
+            assert shown[1] > rep2["start_pose"][1] + 0.9 * rep2["planned"][1] > rep2["start_pose"][1]  # lifted
+            page.screenshot(path=str(ARTIFACTS / "dashboard-2d-replay.png"), full_page=True)
+            assert not errors, errors
+            assert not blocked, blocked
+            ctx.close()
+    finally:
+        stop_server(server)
+        shutil.rmtree(profile, ignore_errors=True)

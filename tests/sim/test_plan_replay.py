@@ -66,6 +66,50 @@ def test_planar_plan_continuous_replay_meets_the_plan(planar_scene: Scene, plana
     assert r.ok
 
 
+def test_continuous_replay_records_the_object_path(planar_scene: Scene, planar_plan, planar_continuous) -> None:  # type: ignore[no-untyped-def]
+    """The sampled object path: from the start pose to the simulated final pose, a sample every
+    ``path_interval`` of simulated time, each step's samples making up its ``simulated``
+    displacement and staying within the deviation the monitor measured at every MuJoCo step."""
+    from sim.plan_paths import path_deviation
+    from sim.plan_replay import DEFAULT_OPTIONS
+
+    r = planar_continuous
+    path = r.object_path
+    T = len(path.times)
+    assert path.poses.shape == (T, 3) and path.steps.shape == (T,)
+    assert path.interval == DEFAULT_OPTIONS.path_interval == 0.005
+    np.testing.assert_allclose(path.poses[0], planar_plan.start_pose, atol=1e-6)
+    np.testing.assert_array_equal(path.poses[-1], r.simulated_final_pose)
+    assert path.times[0] == 0.0 and path.times[-1] == pytest.approx(r.duration, abs=1e-12)
+    gaps = np.diff(path.times)
+    assert np.all(gaps >= 0.0) and float(np.max(gaps)) <= path.interval + 2.5e-4  # one 0.2 ms MuJoCo step late at most
+    assert r.duration / path.interval <= T  # sampled all along, not only at the step ends
+    assert list(np.unique(path.steps)) == [-1, *[st.index for st in r.steps]]
+    assert np.all(np.diff(path.steps) >= 0)  # in step order
+    s = object_size(planar_scene)
+    for st, pst in zip(r.steps, planar_plan.steps, strict=True):
+        seg = path.of_step(st.index)  # (k + 1, 3): the pose before the step, then its samples
+        assert len(seg) >= 2
+        np.testing.assert_allclose(seg[-1] - seg[0], st.simulated, atol=1e-12)
+        planned_path = pst.transition.object_path
+        devs = [path_deviation(Pose.from_vector(p, 2), planned_path, s) for p in seg[1:]]
+        assert max(devs) <= st.max_deviation + 1e-12
+    # the object motion's samples move along the lift: the height rises overall, the path is no jump
+    lift = path.of_step(r.steps[-1].index)
+    assert lift[-1, 1] - lift[0, 1] > 0.9 * r.steps[-1].planned[1] > 0.0
+    assert float(np.max(np.abs(np.diff(lift[:, 1])))) < 0.2 * float(r.steps[-1].planned[1])
+    data = r.to_json()["object_path"]
+    assert len(data["times"]) == T and data["steps"] == [int(k) for k in path.steps]
+    np.testing.assert_allclose(np.array(data["poses"]), path.poses, atol=0.0)
+
+
+def test_path_interval_must_be_positive() -> None:
+    from sim.plan_replay import PlanSimulationOptions
+
+    with pytest.raises(ValueError, match="path_interval"):
+        PlanSimulationOptions(path_interval=0.0)
+
+
 def test_ctp_simulate_replays_a_plan_file(tmp_path, planar_continuous) -> None:  # type: ignore[no-untyped-def]
     plan_file, rep_file = tmp_path / "plan.json", tmp_path / "replay.json"
     r = CliRunner().invoke(app, ["plan", str(EXAMPLES / "planar_disk_envelope.json"), "--goal", "active",
