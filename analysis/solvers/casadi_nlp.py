@@ -12,10 +12,23 @@ Decision variables ``x = [dzeta~_r (r); f_c (L_c)]`` for a fixed unit object dir
 
 IPOPT's failures become :class:`SolverError`; a locally infeasible problem is reported as
 ``found = False`` with IPOPT's status.
+
+Each IPOPT solver is built once per problem and kept (:data:`SOLVERS_KEPT` of them per thread,
+least recently used dropped): the data of a combination (``Lambda~``, ``B``, ``C``, ``G``, ...) are
+constants of the CasADi expressions, exactly as in a solver built for one call, and only the
+direction ``u`` of (31) and its complement ``N_u`` enter as the parameter vector ``p`` (their
+zero entries stay structural zeros, so the derivatives IPOPT sees have the same sparsity as a
+solver built with them as constants). A report that solves (31) for several directions of one
+combination, or twice for one direction (restarted from the DAFC certificate), builds IPOPT once;
+its answers are the ones a fresh solver gives.
 """
 
 from __future__ import annotations
 
+import hashlib
+import threading
+from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,6 +40,9 @@ from analysis.exceptions import SolverError
 
 _INFEASIBLE = {"Infeasible_Problem_Detected", "Restoration_Failed", "Local_Infeasibility"}
 _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
+
+#: Built IPOPT solvers kept per thread (least recently used dropped).
+SOLVERS_KEPT = 32
 
 
 @dataclass(frozen=True)
@@ -106,20 +122,83 @@ def _ipopt_options(max_iter: int) -> dict[str, Any]:
     }
 
 
-def solve_redundancy(
-    p: RedundancyNLP, zeta0: Array | None = None, f0: Array | None = None, max_iter: int = 300
-) -> RedundancyResult:
-    """Solve (31) with IPOPT from ``zeta0`` (default: zero redundancy) and forces ``f0``."""
+@dataclass(frozen=True)
+class _Built:
+    """One built problem: the IPOPT function and its constraint bounds ``lbg <= g <= ubg``."""
+
+    solver: Any  # ca.Function
+    lbg: Array  # (n_g,)
+    ubg: Array  # (n_g,)
+
+
+_local = threading.local()  # each thread its own solvers: a CasADi function is not shared across threads
+
+
+def _solvers() -> OrderedDict[tuple[Any, ...], _Built]:
+    """This thread's built solvers, least recently used first."""
+    built: OrderedDict[tuple[Any, ...], _Built] | None = getattr(_local, "built", None)
+    if built is None:
+        built = _local.built = OrderedDict()
+    return built
+
+
+def _key(p: RedundancyNLP, kind: str, max_iter: int, with_direction: bool) -> tuple[Any, ...]:
+    """What a built solver depends on: the options, every array of ``p`` but the direction (by its
+    bytes) and, for (31), the zero pattern of ``u`` and ``N_u`` (their values are parameters)."""
+    h = hashlib.sha256()
+    for a in (p.Lambda_q_t, p.Lambda_qr_t, p.Lambda_r_t, p.B, p.P_s, p.C, p.G_c, p.G_s_blocks, p.mu_s, p.Xi, p.w_ex):
+        arr = np.ascontiguousarray(a, dtype=float)
+        h.update(repr(arr.shape).encode())
+        h.update(arr.tobytes())
+    key: tuple[Any, ...] = (kind, max_iter, p.with_forces, p.w_min, p.slip_min, p.s_cols, h.hexdigest())
+    if with_direction:
+        key += (p.u.shape, tuple(np.flatnonzero(p.u)), p.N_u.shape, tuple(np.flatnonzero(p.N_u)))
+    return key
+
+
+def _cached(key: tuple[Any, ...], build: Callable[[], _Built]) -> _Built:
+    built = _solvers()
+    got = built.get(key)
+    if got is None:
+        try:
+            got = build()
+        except RuntimeError as e:
+            raise SolverError("IPOPT", str(e)) from e
+        built[key] = got
+        while len(built) > SOLVERS_KEPT:
+            built.popitem(last=False)
+    else:
+        built.move_to_end(key)
+    return got
+
+
+def _masked(name: str, a: Array) -> tuple[ca.SX, ca.SX]:
+    """A symbolic copy of ``a`` (vector or matrix) whose zero entries are structural zeros, and the
+    parameter vector of its non-zero entries (in ``np.flatnonzero`` order)."""
+    a2 = np.atleast_2d(a.reshape(a.shape[0], -1))
+    nz = np.flatnonzero(a2)
+    sym = ca.SX.sym(name, len(nz))
+    m = ca.SX(a2.shape[0], a2.shape[1])
+    for k, flat in enumerate(nz):
+        i, j = divmod(int(flat), a2.shape[1])
+        m[i, j] = sym[k]
+    return m, sym
+
+
+def _build_redundancy(p: RedundancyNLP, max_iter: int) -> _Built:
+    """Problem (31) with ``u`` and ``N_u`` as parameters (see the module docstring)."""
     r = p.Lambda_qr_t.shape[1]
     L_c = p.C.shape[1]
     a_bar = p.u.shape[0]
     d = p.G_s_blocks.shape[2] if p.G_s_blocks.size else 0
     nz = r
     nf = L_c if p.with_forces else 0
+    u, u_par = _masked("u", p.u)  # (a_bar, 1)
+    N_u, n_par = _masked("N_u", p.N_u)  # (a_bar, a_bar - 1)
     x = ca.SX.sym("x", nz + nf)
     z = x[:nz]
-    zc = ca.vertcat(ca.DM(p.u), z)
-    dq = ca.DM(p.Lambda_q_t) @ ca.DM(p.u) + ca.DM(p.Lambda_qr_t) @ z
+    zc = ca.vertcat(u, z)
+    dq = ca.DM(p.Lambda_q_t) @ u + ca.DM(p.Lambda_qr_t) @ z
     obj = ca.sumsqr(dq)
     cons = _Constraints()
     if p.with_forces:
@@ -127,20 +206,32 @@ def solve_redundancy(
         obj = obj + 1e-6 * ca.sumsqr(f)
         wr = ca.DM(p.Lambda_r_t.T) @ _force_constraints(p, cons, zc, f, d)
         if a_bar > 1:
-            cons.add(ca.DM(p.N_u.T) @ wr, 0.0, 0.0)
-        cons.add(ca.DM(p.u).T @ wr, p.w_min, np.inf)
+            cons.add(N_u.T @ wr, 0.0, 0.0)
+        cons.add(u.T @ wr, p.w_min, np.inf)
     elif p.B.shape[0]:
         cons.add(ca.DM(p.B) @ zc, -np.inf, 0.0)
-    nlp = {"x": x, "f": obj, "g": ca.vertcat(*cons.g) if cons.g else ca.SX(0, 1)}
-    opts = _ipopt_options(max_iter)
+    nlp = {"x": x, "p": ca.vertcat(u_par, n_par), "f": obj, "g": ca.vertcat(*cons.g) if cons.g else ca.SX(0, 1)}
+    solver = ca.nlpsol("phi_min", "ipopt", nlp, _ipopt_options(max_iter))
+    return _Built(solver, np.array(cons.lbg), np.array(cons.ubg))
+
+
+def solve_redundancy(
+    p: RedundancyNLP, zeta0: Array | None = None, f0: Array | None = None, max_iter: int = 300
+) -> RedundancyResult:
+    """Solve (31) with IPOPT from ``zeta0`` (default: zero redundancy) and forces ``f0``."""
+    nz = p.Lambda_qr_t.shape[1]
+    nf = p.C.shape[1] if p.with_forces else 0
+    built = _cached(_key(p, "phi_min", max_iter, True), lambda: _build_redundancy(p, max_iter))
+    solver = built.solver
+    x0 = np.zeros(nz + nf)
+    if zeta0 is not None:
+        x0[:nz] = zeta0
+    if p.with_forces:
+        x0[nz:] = f0 if f0 is not None and np.all(np.isfinite(f0)) else 1.0
+    u2, n2 = np.atleast_2d(p.u.reshape(p.u.shape[0], -1)), np.atleast_2d(p.N_u.reshape(p.N_u.shape[0], -1))
+    par = np.concatenate([u2.ravel()[np.flatnonzero(u2)], n2.ravel()[np.flatnonzero(n2)]])
     try:
-        solver = ca.nlpsol("phi_min", "ipopt", nlp, opts)
-        x0 = np.zeros(nz + nf)
-        if zeta0 is not None:
-            x0[:nz] = zeta0
-        if p.with_forces:
-            x0[nz:] = f0 if f0 is not None and np.all(np.isfinite(f0)) else 1.0
-        sol = solver(x0=x0, lbg=np.array(cons.lbg), ubg=np.array(cons.ubg))
+        sol = solver(x0=x0, p=par, lbg=built.lbg, ubg=built.ubg)
     except RuntimeError as e:
         raise SolverError("IPOPT", str(e)) from e
     status = str(solver.stats().get("return_status", "unknown"))
@@ -166,6 +257,26 @@ class RealisableResult:
     f_c: Array  # (L_c,)
 
 
+def _build_realisable(p: RedundancyNLP, max_iter: int) -> _Built:
+    """The problem of :func:`solve_realisable_direction` (no parameters: the direction is free)."""
+    r = p.Lambda_qr_t.shape[1]
+    L_c = p.C.shape[1]
+    a_bar = p.Lambda_r_t.shape[1]
+    d = p.G_s_blocks.shape[2] if p.G_s_blocks.size else 0
+    x = ca.SX.sym("x", a_bar + r + L_c + 1)
+    u, z, f, lam = x[:a_bar], x[a_bar : a_bar + r], x[a_bar + r : a_bar + r + L_c], x[-1]
+    zc = ca.vertcat(u, z)
+    dq = ca.DM(p.Lambda_q_t) @ u + ca.DM(p.Lambda_qr_t) @ z
+    obj = ca.sumsqr(dq) + 1e-6 * ca.sumsqr(f)
+    cons = _Constraints()
+    cons.add(ca.sumsqr(u), 1.0, 1.0)
+    w = _force_constraints(p, cons, zc, f, d)
+    cons.add(ca.DM(p.Lambda_r_t.T) @ w - lam * u, 0.0, 0.0)
+    cons.add(lam, p.w_min, np.inf)
+    solver = ca.nlpsol("realisable", "ipopt", {"x": x, "f": obj, "g": ca.vertcat(*cons.g)}, _ipopt_options(max_iter))
+    return _Built(solver, np.array(cons.lbg), np.array(cons.ubg))
+
+
 def solve_realisable_direction(
     p: RedundancyNLP, u0: Array, zeta0: Array, f0: Array, max_iter: int = 300
 ) -> RealisableResult:
@@ -182,23 +293,12 @@ def solve_realisable_direction(
     r = p.Lambda_qr_t.shape[1]
     L_c = p.C.shape[1]
     a_bar = p.Lambda_r_t.shape[1]
-    d = p.G_s_blocks.shape[2] if p.G_s_blocks.size else 0
-    x = ca.SX.sym("x", a_bar + r + L_c + 1)
-    u, z, f, lam = x[:a_bar], x[a_bar : a_bar + r], x[a_bar + r : a_bar + r + L_c], x[-1]
-    zc = ca.vertcat(u, z)
-    dq = ca.DM(p.Lambda_q_t) @ u + ca.DM(p.Lambda_qr_t) @ z
-    obj = ca.sumsqr(dq) + 1e-6 * ca.sumsqr(f)
-    cons = _Constraints()
-    cons.add(ca.sumsqr(u), 1.0, 1.0)
-    w = _force_constraints(p, cons, zc, f, d)
-    cons.add(ca.DM(p.Lambda_r_t.T) @ w - lam * u, 0.0, 0.0)
-    cons.add(lam, p.w_min, np.inf)
-    opts = _ipopt_options(max_iter)
+    built = _cached(_key(p, "realisable", max_iter, False), lambda: _build_realisable(p, max_iter))
+    solver = built.solver
+    wr0 = p.Lambda_r_t.T @ (p.G_c @ f0 + p.w_ex)
+    x0 = np.concatenate([u0, zeta0, f0, [max(float(u0 @ wr0), p.w_min)]])
     try:
-        solver = ca.nlpsol("realisable", "ipopt", {"x": x, "f": obj, "g": ca.vertcat(*cons.g)}, opts)
-        wr0 = p.Lambda_r_t.T @ (p.G_c @ f0 + p.w_ex)
-        x0 = np.concatenate([u0, zeta0, f0, [max(float(u0 @ wr0), p.w_min)]])
-        sol = solver(x0=x0, lbg=np.array(cons.lbg), ubg=np.array(cons.ubg))
+        sol = solver(x0=x0, lbg=built.lbg, ubg=built.ubg)
     except RuntimeError as e:
         raise SolverError("IPOPT", str(e)) from e
     status = str(solver.stats().get("return_status", "unknown"))

@@ -39,6 +39,8 @@ _RETRY = (highspy.HighsModelStatus.kUnknown, highspy.HighsModelStatus.kSolveErro
 
 Status = Literal["optimal", "infeasible", "unbounded"]
 
+_OPTIMAL = highspy.HighsModelStatus.kOptimal
+
 
 @dataclass(frozen=True)
 class LPProblem:
@@ -265,12 +267,8 @@ class LPModel:
         return LPProblem(np.asarray(c, dtype=float).ravel(), self.A_ub, self.b_ub, self.A_eq, self.b_eq,
                          self.lb, self.ub, maximize)
 
-    def solve(self, c: Array, maximize: bool = False) -> LPResult:
-        c = np.asarray(c, dtype=float).ravel()
-        sense = -1.0 if maximize else 1.0
-        self._h.changeColsCost(self.n, self._idx, sense * c)
-        self._h.run()
-        ms = self._h.getModelStatus()
+    def _retry(self, ms: highspy.HighsModelStatus) -> highspy.HighsModelStatus:
+        """The model status after the retries of an undecided run (``ms`` in ``_RETRY``)."""
         if ms in _RETRY:
             # a warm start from an unbounded/degenerate basis can end undecided: solve afresh
             self._h.clearSolver()
@@ -295,8 +293,18 @@ class LPModel:
             self._h.run()
             ms = self._h.getModelStatus()
             self._h.setOptionValue("solver", "choose")
+        return ms
+
+    def solve(self, c: Array, maximize: bool = False) -> LPResult:
+        c = np.asarray(c, dtype=float).ravel()
+        sense = -1.0 if maximize else 1.0
+        self._h.changeColsCost(self.n, self._idx, sense * c)
+        self._h.run()
+        ms = self._h.getModelStatus()
+        if ms != _OPTIMAL:  # the common case skips the retry chain
+            ms = self._retry(ms)
         problem = self.problem(c, maximize)
-        if ms == highspy.HighsModelStatus.kOptimal:
+        if ms == _OPTIMAL:
             sol = self._h.getSolution()
             x = np.asarray(sol.col_value, dtype=float)
             # HiGHS' duals satisfy s c - A^T row_dual - col_dual = 0: negated, they are LPResult's

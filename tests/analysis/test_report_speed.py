@@ -1,0 +1,122 @@
+"""Issue 13: the full report made cheaper without changing its answers.
+
+* IPOPT (problem 31) is built once per combination and reused with the direction as a parameter:
+  the answers equal those of a solver built for the one call.
+* The boundary refinement of the sampled DAFC resolves a boundary on a face of the allowable cone
+  with one test where the great circle leaves the cone: that point is on the face (``H u = 0``),
+  allowable and a member, and just outside it the motion is not allowable.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import analysis.solvers.casadi_nlp as nlp
+from analysis.combination import CombinationParts, analyze_combination
+from analysis.contacts import build_system
+from analysis.dafc import _allowable_faces, _face_crossing, dafc_set, default_samples, sample_directions
+from analysis.loader import load_scene
+from analysis.torques import _nlp_data
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def planar():
+    return build_system(load_scene(ROOT / "examples" / "planar_disk_envelope.json"))
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v)
+
+
+def test_reused_ipopt_solver_gives_the_answers_of_a_fresh_one(planar) -> None:
+    # SSDSD: S-points whose slip depends on the redundancy, so (31) has the forces as unknowns
+    parts = CombinationParts.build(planar, "SSDSD")
+    sy, sel, ms, st, fs = parts.system, parts.sel, parts.ms, parts.st, parts.fs
+    assert parts.oracle().slip_depends_on_redundancy
+    rng = np.random.default_rng(7)
+    dirs = [_unit(rng.standard_normal(ms.a_bar)) for _ in range(4)]
+    problems = [_nlp_data(sy, sel, ms, st, fs, u, with_forces=True) for u in dirs]
+    nlp._solvers().clear()
+    reused = [nlp.solve_redundancy(p) for p in problems]
+    assert len(nlp._solvers()) == 1  # one build for the four directions (no zero entries in u, N_u)
+    for p, r in zip(problems, reused, strict=True):
+        nlp._solvers().clear()
+        fresh = nlp.solve_redundancy(p)
+        assert fresh.status == r.status
+        np.testing.assert_allclose(fresh.zeta_r, r.zeta_r, rtol=0, atol=1e-12)
+        assert fresh.phi == pytest.approx(r.phi, abs=1e-12)
+        # phi is the norm of the finger motion of the returned redundancy (eq. 31's objective)
+        assert r.phi == pytest.approx(float(np.linalg.norm(p.Lambda_q_t @ p.u + p.Lambda_qr_t @ r.zeta_r)),
+                                      abs=1e-12)
+
+
+def test_direction_zero_pattern_is_part_of_the_solver_key(planar) -> None:
+    parts = CombinationParts.build(planar, "SSDSD")
+    sy, sel, ms, st, fs = parts.system, parts.sel, parts.ms, parts.st, parts.fs
+    e0 = np.eye(ms.a_bar)[0]  # zero entries: structural zeros, another solver
+    u = _unit(np.ones(ms.a_bar))
+    nlp._solvers().clear()
+    a = nlp.solve_redundancy(_nlp_data(sy, sel, ms, st, fs, e0, with_forces=True))
+    nlp.solve_redundancy(_nlp_data(sy, sel, ms, st, fs, u, with_forces=True))
+    assert len(nlp._solvers()) == 2
+    nlp._solvers().clear()
+    b = nlp.solve_redundancy(_nlp_data(sy, sel, ms, st, fs, e0, with_forces=True))
+    assert a.status == b.status and np.allclose(a.zeta_r, b.zeta_r, rtol=0, atol=1e-12)
+
+
+def test_face_crossing_lies_on_the_cone_boundary() -> None:
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        # a pointed cone {u : H u <= 0} around +e2 in R^3
+        H = np.column_stack([rng.standard_normal((5, 2)), -np.abs(rng.standard_normal(5)) - 0.5])
+        H /= np.linalg.norm(H, axis=1, keepdims=True)
+        inner = np.array([0.0, 0.0, 1.0])
+        outer = _unit(rng.standard_normal(3))
+        if np.max(H @ outer) <= 1e-6:
+            continue
+        m = _face_crossing(H, inner, outer)
+        assert m is not None
+        assert abs(np.linalg.norm(m) - 1.0) < 1e-12
+        assert abs(float(np.max(H @ m))) < 1e-12  # on the boundary: one row active, none violated
+        # on the arc: m = alpha inner + beta outer with alpha, beta > 0
+        coef, *_ = np.linalg.lstsq(np.column_stack([inner, outer]), m, rcond=None)
+        assert np.allclose(np.column_stack([inner, outer]) @ coef, m, atol=1e-12) and np.all(coef > 0)
+        # just before it the arc is inside, just after it outside
+        before, after = _unit(m + 1e-6 * (inner - m)), _unit(m + 1e-6 * (outer - m))
+        assert np.max(H @ before) < 0 < np.max(H @ after)
+
+
+def test_refinement_resolves_faces_of_the_allowable_cone_exactly(planar) -> None:
+    parts = CombinationParts.build(planar, "SSDFD")
+    ms = parts.ms
+    assert ms.a_bar == 3
+    H = _allowable_faces(ms)
+    assert H is not None
+    oracle = parts.oracle()
+    samples = default_samples(ms.a_bar)
+    n0 = len(sample_directions(ms, samples))
+    ds = dafc_set(oracle, samples=samples)
+    refined = ds.tests[n0:]
+    on_face = [t for t in refined if t.member and float(np.max(H @ t.u)) > -1e-9]
+    assert on_face, "expected boundaries on faces of A_r"
+    fresh = parts.oracle()
+    for t in on_face:
+        assert float(np.max(H @ t.u)) < 1e-9  # allowable: inside or on A_r
+        assert fresh.test(t.direction).member  # an independent oracle agrees
+        # a step out of the cone through the active face is not allowable (eq. 20)
+        out = _unit(t.u + 1e-4 * H[int(np.argmax(H @ t.u))])
+        assert fresh.test(ms.Lambda_r_t @ out).reason.startswith("not allowable")
+    # the sampled directions' verdicts are the oracle's, whatever the refinement
+    for t in ds.tests[:n0]:
+        assert fresh.test(t.direction, witness=False).member == t.member
+
+
+def test_report_states_its_refinement(planar) -> None:
+    out = analyze_combination(planar, "SSDFD").to_json()
+    assert "allowable cone" in out["dafc"]["refinement"]
+    assert len(out["dafc"]["directions"]) == len(out["dafc"]["member"]) == len(out["dafc"]["work"])
