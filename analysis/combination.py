@@ -14,7 +14,16 @@ import numpy as np
 
 from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection, selection
-from analysis.dafc import SEMANTICS, DAFCOracle, DAFCSet, DirectionTest, dafc_nonempty, dafc_set, default_samples
+from analysis.dafc import (
+    REFINEMENT,
+    SEMANTICS,
+    DAFCOracle,
+    DAFCSet,
+    DirectionTest,
+    dafc_nonempty,
+    dafc_set,
+    default_samples,
+)
 from analysis.dpfc import DPFC, dpfc
 from analysis.exceptions import CTPError, NoStationaryGrasp
 from analysis.friction import FrictionSet, friction_set, kinetic_friction
@@ -113,6 +122,9 @@ def summarize(parts: CombinationParts, stationary_known: bool | None = None,
         if oracle.undecided:
             reason += f"; degenerate: {oracle.undecided} force LPs were numerically undecided"
             exact = False
+        if oracle.sector_open:
+            reason += f"; not proven: the slip-sector search left {oracle.sector_open} boxes open"
+            exact = False
         return CombinationSummary(c, False, reason, ms.a, ms.a_bar, 0, p, exact, None)
     return CombinationSummary(c, True, "feasible", ms.a, ms.a_bar, dim, p, exact, best.direction)
 
@@ -161,6 +173,7 @@ class CombinationReport:
                 "directions": _list(self.dafc.directions),
                 "member": [bool(m) for m in self.dafc.member],
                 "work": [None if not np.isfinite(w) else float(w) for w in self.dafc.work],
+                "refinement": REFINEMENT,  # how the boundaries between sampled directions were located
                 "allowable_cone": {
                     "rays": _list(self.dafc.allowable.rays),
                     "lines": _list(self.dafc.allowable.lines),
@@ -293,8 +306,8 @@ def analyze_combination(
         failure = ""
     # only the torque limits stand in the way: the error names the joints and torques needed
     stationary_note = failure.split(": ", 1)[-1] if "within the joint torque limits" in failure else None
-    summary = summarize(parts, stationary_known=grasp is not None)
-    oracle = parts.oracle()
+    oracle = parts.oracle()  # one oracle (its LP models built once) for the summary, the set and the torques
+    summary = summarize(parts, stationary_known=grasp is not None, oracle=oracle)
     if samples is None:  # the circle/sphere densely, higher-dimensional motion spaces coarsely
         samples = default_samples(ms.a_bar)
     dset = dafc_set(oracle, samples=samples) if ms.a_bar else None

@@ -22,6 +22,7 @@ reports ``exact = False``.
 
 from __future__ import annotations
 
+import heapq
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -31,15 +32,16 @@ from analysis.contacts import GraspSystem, Selection
 from analysis.exceptions import SolverError
 from analysis.friction import FrictionSet, kinetic_friction
 from analysis.linalg import rank
-from analysis.motion import MotionSpace
+from analysis.motion import NULL_ROW_TOL, MotionSpace
 from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, snap
 from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators
 from analysis.solvers.highs import LPModel
 from analysis.statics import Statics
 from analysis.torque_conditions import torque_conditions
 
-#: Relative tolerance on non-penetration (positive work: :mod:`analysis.scales`).
-ALLOW_TOL = 1e-7
+#: Relative tolerance on non-penetration (positive work: :mod:`analysis.scales`); the rows of
+#: ``B`` below it are zero (:attr:`analysis.motion.MotionSpace.B`).
+ALLOW_TOL = NULL_ROW_TOL
 #: An S-point "really slides" when its slip exceeds this fraction of the motion size.
 SLIP_TOL = 1e-7
 
@@ -100,6 +102,8 @@ class DAFCOracle:
         self._d = d
         self.lp_count = 0
         self.undecided = 0  # force LPs that ended numerically undecided (degenerate data)
+        self.sector_boxes = 0  # boxes of the slip-sector search (:func:`slip_sector_search`)
+        self.sector_open = 0  # of them, left open (resolution or budget): emptiness not proven there
 
     # -- kinematics -----------------------------------------------------------------------------
 
@@ -434,6 +438,317 @@ class DAFCOracle:
 
 
 # ------------------------------------------------------------------------------------------------
+# A complete search over the S-points' slip directions, for one object direction
+
+#: Slip-sector search (:func:`slip_sector_search`): sector boxes examined per direction at most,
+#: and the smallest sector half-width (radians, 3-D) refined before a box counts as undecided.
+SECTOR_BUDGET = 400
+SECTOR_MIN_HALF = np.pi / 128
+#: Bound of the redundancy coordinates in the sector LPs, relative to the motion's size.
+SECTOR_ZMAX = 1e2
+#: Sides of the polygon circumscribing a free S-point's friction disc (3-D).
+SECTOR_FREE_SIDES = 8
+
+Sector = tuple[float, float] | None  # an interval of slip angles in the tangent basis; None = any
+
+
+@dataclass(frozen=True)
+class SectorSearch:
+    """The answer of :func:`slip_sector_search` for one object direction."""
+
+    test: DirectionTest | None  # a member (motion, forces), or None
+    boxes: int  # sector boxes examined
+    open_boxes: int  # boxes neither pruned nor refined further (budget, resolution); 0 = decided
+    bound: float  # the largest upper bound of the work over the open boxes (-inf when none)
+    dim: int = 0  # rank of the object parts of the member's box cone (the member lies inside it)
+
+    @property
+    def decided(self) -> bool:
+        return self.test is not None or self.open_boxes == 0
+
+
+def _unit_angle(theta: float, d: int) -> Array:
+    """Unit slip direction at angle ``theta`` in tangent coordinates ``(d - 1,)``."""
+    return np.array([np.cos(theta)]) if d == 2 else np.array([np.cos(theta), np.sin(theta)])
+
+
+def _half(sec: Sector) -> float:
+    return np.pi if sec is None else 0.5 * (sec[1] - sec[0])
+
+
+def _split(sec: Sector, d: int) -> list[Sector]:
+    """Children of a sector: a free point becomes the two signs (2-D) or four quarter turns (3-D)
+    centred on the tangent axes; an interval is halved."""
+    if sec is None:
+        if d == 2:
+            return [(0.0, 0.0), (np.pi, np.pi)]
+        return [(q * np.pi / 2 - np.pi / 4, q * np.pi / 2 + np.pi / 4) for q in range(4)]
+    a, b = sec
+    m = 0.5 * (a + b)
+    return [(a, m), (m, b)]
+
+
+def _sector_rows(sec: Sector, d: int, margin: float) -> tuple[Array, Array]:
+    """Rows ``R sigma >= r`` (tangent coordinates) putting the slip ``sigma`` in the sector, at
+    least ``margin`` along its bisector (so the point really slides); none for a free point."""
+    if sec is None:
+        return np.zeros((0, d - 1)), np.zeros(0)
+    a, b = sec
+    c = _unit_angle(0.5 * (a + b), d)
+    rows, rhs = [c], [margin]
+    if d == 3 and b > a:
+        rows += [np.array([-np.sin(a), np.cos(a)]), np.array([np.sin(b), -np.cos(b)])]
+        rhs += [0.0, 0.0]
+    return np.array(rows), np.array(rhs)
+
+
+def _relaxed_box_lp(oracle: DAFCOracle, dr: Array, fixed_G: Array, dep: list[int], box: tuple[Sector, ...]
+                    ) -> tuple[float, list[Array]]:
+    """Upper bound of the work of (22) over every motion whose slips lie in the sector ``box``.
+
+    Unknowns ``[f_c; friction of the dependent S-points]`` in units of the force scale. The
+    friction ``t = -mu n s/|s|`` of a dependent S-point with slip angle in ``[a, b]`` (half-width
+    ``h``) is ``-(alpha_a e(a) + alpha_b e(b))`` with ``alpha >= 0`` and
+    ``mu n <= alpha_a + alpha_b <= mu n / cos h`` (the band between the arc's chord and its
+    tangent at the bisector, exact as ``h -> 0``); a sign in 2-D is exact; a free point has any
+    tangential friction inside a circumscribed polygon of ``mu n``. ``fixed_G`` ``(D, L_c)`` is
+    ``G_c`` plus the kinetic friction of the S-points whose slip does not depend on the
+    redundancy. Returns the bound and the friction directions of a maximiser (tangent
+    coordinates, per dependent point; empty when the box admits no forces)."""
+    sy, sel, st, fs = oracle.system, oracle.sel, oracle.st, oracle.fs
+    d, L_c = sy.d, st.G_c.shape[1]
+    cols: list[Array] = []  # (D,) per friction unknown
+    rows: list[tuple[dict[int, float], float]] = []  # sparse rows over [f_c; t] <= rhs
+    slots: list[tuple[int, ...]] = []
+    for k, sec in zip(dep, box, strict=True):
+        i = sel.s_index[k]
+        T = sy.tangents[i]  # (d-1, d)
+        n_col = sel.c_slices[i].start
+        mu = float(sy.mu[i])
+        first = L_c + len(cols)
+        h = _half(sec)
+        if sec is None:
+            ang = 2 * np.pi * np.arange(SECTOR_FREE_SIDES) / SECTOR_FREE_SIDES
+            dirs = [np.array([1.0]), np.array([-1.0])] if d == 2 else [_unit_angle(t, 3) for t in ang]
+            r_mu = mu if d == 2 else mu / np.cos(np.pi / SECTOR_FREE_SIDES)
+            for j in range(d - 1):
+                cols.append(sy.G_blocks[i] @ T[j])
+            for c in dirs:
+                rows.append(({first + j: float(c[j]) for j in range(d - 1)} | {n_col: -r_mu}, 0.0))
+            slots.append(tuple(range(first, first + d - 1)))
+        elif h <= 0.0:
+            e = T.T @ _unit_angle(sec[0], d)  # (d,) world slip direction
+            fixed_G = fixed_G.copy()
+            fixed_G[:, n_col] = fixed_G[:, n_col] - mu * (sy.G_blocks[i] @ e)
+            slots.append(())
+        else:
+            for th in sec:
+                cols.append(-(sy.G_blocks[i] @ (T.T @ _unit_angle(th, d))))
+            rows.append(({first: -1.0, first + 1: -1.0, n_col: mu}, 0.0))
+            rows.append(({first: 1.0, first + 1: 1.0, n_col: -mu / np.cos(h)}, 0.0))
+            slots.append((first, first + 1))
+    n_t = len(cols)
+    n = L_c + n_t
+    G = np.hstack([fixed_G, np.array(cols).T.reshape(sy.D, n_t)])  # (D, n)
+    A_ub = np.zeros((fs.C.shape[0] + 1 + len(rows), n))
+    A_ub[: fs.C.shape[0], :L_c] = fs.C
+    A_ub[fs.C.shape[0], :L_c] = fs.N.sum(axis=0)
+    b_ub = np.zeros(A_ub.shape[0])
+    b_ub[fs.C.shape[0]] = GRIP_BOUND
+    for r, (entries, rhs) in enumerate(rows):
+        for j, v in entries.items():
+            A_ub[fs.C.shape[0] + 1 + r, j] = v
+        b_ub[fs.C.shape[0] + 1 + r] = rhs
+    lb = np.r_[np.full(L_c, -np.inf), [0.0 if _half(sec) < np.pi else -np.inf
+                                         for sec, sl in zip(box, slots, strict=True) for _ in sl]]
+    model = LPModel(n, A_ub=A_ub, b_ub=b_ub, A_eq=snap(oracle.Xi.T @ G),
+                    b_eq=snap(-(oracle.Xi.T @ sy.w_ex) / sy.scales.force), lb=lb, feasibility=LP_FEAS_TOL)
+    res = model.solve(G.T @ dr, maximize=True)
+    oracle.lp_count += 1
+    if res.status == "infeasible":
+        return -np.inf, []
+    if res.status != "optimal":  # the grip bound bounds every force
+        raise SolverError("HiGHS", f"slip-sector LP ended '{res.status}' although its forces are bounded")
+    assert res.objective is not None and res.x is not None
+    x = res.x
+    targets: list[Array] = []
+    for sec, sl in zip(box, slots, strict=True):
+        if sec is None:
+            t = x[list(sl)]  # friction in tangent coordinates; the slip opposes it
+            targets.append(-t if np.linalg.norm(t) > 1e-12 else np.zeros(d - 1))
+        elif not sl:
+            targets.append(_unit_angle(sec[0], d))
+        else:
+            targets.append(x[sl[0]] * _unit_angle(sec[0], d) + x[sl[1]] * _unit_angle(sec[1], d))
+    return float(res.objective * sy.scales.force + dr @ sy.w_ex), targets
+
+
+def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector, ...], targets: list[Array]
+                ) -> Array | None:
+    """An allowable redundancy whose dependent slips lie in the sector ``box`` and come closest
+    (L1, tangent coordinates) to the directions ``targets``, or None when no allowable motion has
+    its slips in the box (an LP)."""
+    ms, sy, sel = oracle.ms, oracle.system, oracle.sel
+    a_bar, nr, d = ms.a_bar, ms.n_redundant, sy.d
+    scale = max(1.0, float(np.linalg.norm(ms.Lambda_q_t @ u)))
+    zmax = SECTOR_ZMAX * scale
+    margin = 2.0 * SLIP_TOL * (1.0 + zmax * np.sqrt(nr))
+    k_dev = (d - 1) * len(dep)
+    n = nr + k_dev
+    A: list[Array] = []
+    b: list[float] = []
+    B_u, B_r = oracle.B[:, :a_bar], oracle.B[:, a_bar:]
+    for r in range(B_r.shape[0]):
+        A.append(np.r_[B_r[r], np.zeros(k_dev)])
+        b.append(float(-(B_u[r] @ u)) + 0.5 * ALLOW_TOL)
+    for q, (k, sec, g) in enumerate(zip(dep, box, targets, strict=True)):
+        T = sy.tangents[sel.s_index[k]]
+        rows = slice(k * d, (k + 1) * d)
+        S_z = T @ oracle.Ps[rows, a_bar:]  # (d-1, nr): sigma = S_0 + S_z z
+        S_0 = T @ (oracle.Ps[rows, :a_bar] @ u)  # (d-1,)
+        R, rhs = _sector_rows(sec, d, margin)
+        for rr, v in zip(R, rhs, strict=True):
+            A.append(np.r_[-(rr @ S_z), np.zeros(k_dev)])
+            b.append(float(rr @ S_0 - v))
+        gn = float(np.linalg.norm(g))
+        goal = scale * g / gn if gn > 1e-12 else np.zeros(d - 1)
+        for j in range(d - 1):
+            e = np.zeros(k_dev)
+            e[q * (d - 1) + j] = 1.0
+            A.append(np.r_[S_z[j], -e])
+            b.append(float(goal[j] - S_0[j]))
+            A.append(np.r_[-S_z[j], -e])
+            b.append(float(S_0[j] - goal[j]))
+    model = LPModel(n, A_ub=np.array(A).reshape(-1, n), b_ub=np.array(b),
+                    lb=np.r_[np.full(nr, -zmax), np.zeros(k_dev)], ub=np.r_[np.full(nr, zmax), np.full(k_dev, np.inf)])
+    try:
+        res = model.solve_cold(np.r_[np.zeros(nr), np.ones(k_dev)])
+    except SolverError:
+        oracle.undecided += 1
+        return None
+    oracle.lp_count += 1
+    if res.status != "optimal" or res.x is None:
+        return None
+    return np.asarray(res.x[:nr])
+
+
+def _box_cone(oracle: DAFCOracle, box: tuple[Sector, ...]) -> Array:
+    """Generators ``(k, a)`` (unit rows, both signs of lines) of the cone of allowable motions
+    ``dzeta_c`` whose S-point slips lie in the sector ``box`` (edges included): ``B dzeta_c <= 0``
+    (eq. 20) and the sector rows of :func:`_sector_rows` on ``T_k P_s dzeta_c`` (cdd)."""
+    ms, sy, sel = oracle.ms, oracle.system, oracle.sel
+    d = sy.d
+    rows = [oracle.B] if oracle.B.shape[0] else []
+    for k, sec in enumerate(box):
+        T = sy.tangents[sel.s_index[k]]
+        R, _ = _sector_rows(sec, d, 0.0)
+        if R.shape[0]:
+            rows.append(-(R @ T @ oracle.Ps[k * d:(k + 1) * d]))  # R sigma >= 0
+    if not rows:
+        return np.vstack([np.eye(ms.a), -np.eye(ms.a)])
+    return cone_generators(np.vstack(rows)).all_directions()
+
+
+def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> SectorSearch:
+    """Is DAFC (22) non-empty, for some object direction and finger redundancy? A branch and
+    bound over the slip directions of the S-points, on the whole allowable cone.
+
+    A sector box confines the slip of every S-point to an interval of angles in its tangent plane
+    (a sign in 2-D; "free" at the root). The allowable motions ``dzeta_c`` with slips in the box
+    form a polyhedral cone ``K`` (:func:`_box_cone`, generators ``g_j``), and every admissible
+    force of such a motion lies in the box's relaxed force set (:func:`_relaxed_box_lp`), which
+    does not depend on the motion. The work ``dr^T w`` is linear in ``dr`` for a fixed force, so
+    if no relaxed force does positive work along any generator's object part, no motion of ``K``
+    is a member: the box is pruned (the argument of :class:`DAFCSet` with the friction fixed to
+    the box). Otherwise the centroid of ``K`` and points just inside ``K`` next to the generators
+    with the largest bound are tested exactly; a member ends the search; else the widest sector is
+    split (a free point first into signs or quarter turns), best bound first. In 2-D the leaves
+    fix every friction direction, so the bound is exact there and the search is a complete
+    decision; in 3-D it is complete down to the half-width ``SECTOR_MIN_HALF``. A box left open
+    there (or past the budget, or whose cone cdd cannot enumerate) is reported as open, never as
+    empty.
+    """
+    ms, sy = oracle.ms, oracle.system
+    a_bar, d = ms.a_bar, sy.d
+    nS = len(oracle.sel.s_index)
+    for k in range(nS):  # an S-point whose slip is zero for every motion never slides
+        if float(np.abs(oracle.Ps[k * d:(k + 1) * d]).max(initial=0.0)) <= 1e-9:
+            return SectorSearch(None, 0, 0, -np.inf)
+    G0 = oracle.st.G_c
+    heap: list[tuple[float, int, tuple[Sector, ...]]] = []
+    counter = boxes = open_boxes = 0
+    open_bound = -np.inf
+    pending: list[tuple[Sector, ...]] = [tuple(None for _ in range(nS))]
+    leaf_half = 0.0 if d == 2 else SECTOR_MIN_HALF
+    while pending or heap:
+        if not pending:
+            neg, _, box = heapq.heappop(heap)
+            if boxes >= budget:
+                open_boxes += 1
+                open_bound = max(open_bound, -neg)
+                continue
+            widest = max(range(nS), key=lambda q: _half(box[q]))
+            pending.extend((*box[:widest], child, *box[widest + 1:]) for child in _split(box[widest], d))
+            continue
+        box = pending.pop()
+        boxes += 1
+        try:
+            Z = _box_cone(oracle, box)  # (k, a)
+        except SolverError:
+            open_boxes += 1  # cdd could not enumerate this box's cone: left open, never called empty
+            continue
+        U = Z[:, :a_bar]
+        moving = np.linalg.norm(U, axis=1) > 1e-9
+        if not moving.any():
+            continue  # no motion with these slips moves the object
+        Z, U = Z[moving], U[moving]
+        bounds = np.full(len(U), -np.inf)
+        targets: list[list[Array]] = []
+        for j, u in enumerate(U):
+            dr = ms.Lambda_r_t @ (u / np.linalg.norm(u))
+            ub, tg = _relaxed_box_lp(oracle, dr, G0, list(range(nS)), box)
+            bounds[j] = ub - sy.scales.work_tol(dr)
+            targets.append(tg)
+        if bounds.max() <= 0.0:
+            continue  # no relaxed force does positive work along any generator: no member here
+        centre = Z.sum(axis=0)
+        order = [int(j) for j in np.argsort(-bounds)[:3] if bounds[j] > 0.0]
+        cands = [centre] + [Z[j] + 0.01 * centre / max(1e-12, float(np.linalg.norm(centre))) for j in order]
+        if ms.n_redundant:
+            # the best generator's direction with the redundancy whose slips come closest to the
+            # relaxed maximiser's friction directions
+            j = order[0]
+            u_j = U[j] / np.linalg.norm(U[j])
+            z = _box_motion(oracle, u_j, list(range(nS)), box, targets[j])
+            if z is not None:
+                cands.append(np.r_[u_j, z])
+            # and the same at the centroid's object direction
+            u_c = centre[:a_bar]
+            if a_bar > 1 and float(np.linalg.norm(u_c)) > 1e-9:
+                u_c = u_c / np.linalg.norm(u_c)
+                _, tg = _relaxed_box_lp(oracle, ms.Lambda_r_t @ u_c, G0, list(range(nS)), box)
+                z = _box_motion(oracle, u_c, list(range(nS)), box, tg) if tg else None
+                if z is not None:
+                    cands.append(np.r_[u_c, z])
+        for zc in cands:
+            nu = float(np.linalg.norm(zc[:a_bar]))
+            if nu <= 1e-9:
+                continue
+            t = oracle.test(ms.Lambda_r_t @ (zc[:a_bar] / nu), zeta_r=zc[a_bar:] / nu, screen=False)
+            if t.member:
+                dim = int(np.linalg.matrix_rank(U, tol=1e-9))
+                return SectorSearch(t, boxes, 0, float(bounds.max()), dim)
+        widest = max(range(nS), key=lambda q: _half(box[q]))
+        if _half(box[widest]) <= leaf_half:
+            open_boxes += 1  # a leaf: the bound is above the tolerance, no tested motion is a member
+            open_bound = max(open_bound, float(bounds.max()))
+            continue
+        counter += 1
+        heapq.heappush(heap, (-float(bounds.max()), counter, box))
+    return SectorSearch(None, boxes, open_boxes, open_bound)
+
+
+# ------------------------------------------------------------------------------------------------
 # The set of DAFC directions
 
 
@@ -560,6 +875,34 @@ def _prefer_realisable(oracle: DAFCOracle, dirs: list[Array], screen: bool = Tru
     return first
 
 
+#: Redundancy draws per direction and scale of :func:`_redundancy_draws`.
+REDUNDANCY_DRAWS = 24
+
+
+def _redundancy_draws(oracle: DAFCOracle, dirs: list[Array]) -> DirectionTest | None:
+    """The first member among seeded allowable redundancies ``z0 + s N(0, I)`` (``z0`` least-L1,
+    ``s`` 0.1, 1 and 10 times the motion's size) for each direction of ``dirs``, or None."""
+    ms = oracle.ms
+    if not ms.n_redundant:
+        return None
+    rng = np.random.default_rng(9)
+    for u in dirs:
+        z0 = oracle.redundancy_for(u)
+        if z0 is None:
+            continue
+        size = max(1.0, float(np.linalg.norm(ms.Lambda_q_t @ u)))
+        for s in (0.1, 1.0, 10.0):
+            for _ in range(REDUNDANCY_DRAWS):
+                z = z0 + s * size * rng.standard_normal(ms.n_redundant)
+                zc = ms.zeta_c(u, z)
+                if oracle.B.shape[0] and np.any(oracle.B @ zc > ALLOW_TOL * max(1.0, float(np.linalg.norm(zc)))):
+                    continue
+                t = oracle.test(ms.Lambda_r_t @ u, zeta_r=z, screen=False, witness=False)
+                if t.member:
+                    return t
+    return None
+
+
 def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[DirectionTest | None, int, bool]:
     """Decide whether DAFC is empty; return (a member or None, dim DAFC, exact).
 
@@ -571,8 +914,12 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     generators are tested with the full redundancy search. A member in the relative interior of
     ``A_r`` has, for non-degenerate data, a neighbourhood of members in ``A_r`` (the slips and the
     LP data vary continuously), so DAFC then has the dimension of ``A_r``; a member found only on
-    the boundary gives the rank of the members. These answers are marked ``exact = False`` (a
-    local search over slips and redundancy).
+    the boundary gives the rank of the members. (2b) Failing those, the branch and bound over the
+    S-points' slip directions (:func:`slip_sector_search`) either finds a member, or closes every
+    box, which proves emptiness (``exact = True``); (2c) where it leaves boxes open (3-D sectors at
+    the resolution or past the budget; ``oracle.sector_open`` counts them and the table's reason
+    says so), seeded redundancies and then (3) the report's sample are tried. Members are marked
+    ``exact = False`` (the dimension is a local estimate).
 
     The returned member (the combination's example direction) is, within each stage, the first
     one whose torque set (32) is non-empty (:meth:`DAFCOracle.realisable`), else the first
@@ -629,6 +976,23 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
                 if best is None or ok:
                     best, best_ok = t, ok
     if best is None:
+        # (2b) the branch and bound over the S-points' slip directions on the whole allowable
+        # cone (:func:`slip_sector_search`): a member, or a proof of emptiness when it closes
+        # every box
+        found = slip_sector_search(oracle)
+        oracle.sector_boxes += found.boxes
+        if found.test is not None:
+            return found.test, max(1, found.dim), False
+        if found.decided:
+            return None, 0, True
+        oracle.sector_open += found.open_boxes
+        # (2c) the search left boxes open: seeded redundancies at three scales around the least-L1
+        # one, on the generators with positive relaxed work and the centroid (sampling, not a proof)
+        t = _redundancy_draws(oracle, positive + ([centroid / np.linalg.norm(centroid)]
+                                                  if np.linalg.norm(centroid) > 1e-9 else []))
+        if t is not None:
+            return t, 1, False
+    if best is None:
         # (3) the directions the full report samples (:func:`dafc_set`), so that a combination the
         # table calls empty never shows members in its own report
         for u in sample_directions(ms, default_samples(ms.a_bar)):
@@ -671,13 +1035,51 @@ def sample_directions(ms: MotionSpace, samples: int, seed: int = 0) -> Array:
     return np.vstack([U, extra]) if extra.size else U
 
 
+#: How :func:`dafc_set` refines the boundaries of the sampled set (the full report says it).
+REFINEMENT = ("a (member, non-member) pair whose non-member is not allowable is resolved where the great circle "
+              "between them leaves the allowable cone (one test; bisected only if that point is not a member); "
+              "every other pair is bisected 6 times")
+
+
+def _allowable_faces(ms: MotionSpace) -> Array | None:
+    """Unit rows ``H`` ``(m, a_bar)`` of the allowable cone ``A_r = {u : H u <= 0}`` (eq. 20) in
+    motion coordinates, or None when it has no proper face (the whole space), lies in a
+    hyperplane, or cdd fails (then every boundary is bisected)."""
+    from analysis.solvers.cdd import generators_to_inequalities  # here: the module's head is another room's
+
+    try:
+        H, b, flat = generators_to_inequalities(allowable_cone(ms))  # (m, a_bar), (m,)
+    except SolverError:
+        return None
+    if flat or H.shape[0] == 0 or np.any(np.abs(b) > 1e-9):
+        return None
+    return H / np.linalg.norm(H, axis=1, keepdims=True)
+
+
+def _face_crossing(H: Array, inner: Array, outer: Array) -> Array | None:
+    """The unit direction where the great-circle arc from ``inner`` (in ``A_r``) to ``outer`` (not
+    allowable) leaves ``{u : H u <= 0}``: ``(1 - t) inner + t outer`` for the least ``t`` at
+    which a row becomes active (the arc and the chord meet the same faces: ``A_r`` is a cone);
+    None when the rows do not separate them."""
+    hi, ho = H @ inner, H @ outer  # (m,)
+    rising = ho > hi + 1e-12
+    if not np.any(rising & (ho > 0)):
+        return None
+    t = float(np.min(np.clip(-hi[rising] / (ho[rising] - hi[rising]), 0.0, 1.0)))
+    m = (1 - t) * inner + t * outer  # (a_bar,)
+    nm = float(np.linalg.norm(m))
+    return None if nm < 1e-12 or t <= 0.0 or t >= 1.0 else m / nm
+
+
 def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int = 0) -> DAFCSet:
     """Sample the unit sphere of the motion space, test every direction, refine boundaries.
 
     ``a_bar = 1``: both directions; ``a_bar = 2``: a circle of ``samples`` angles; more: a seeded
     Fibonacci/Gaussian sample plus the allowable cone's generators. Each adjacent (member,
-    non-member) pair on the circle (``a_bar = 2``) or nearest-neighbour pair is bisected
-    ``refine`` times along the great circle.
+    non-member) pair on the circle (``a_bar = 2``) or nearest-neighbour pair is refined along
+    the great circle (:data:`REFINEMENT`): where the non-member is not allowable (eq. 20) and the
+    arc leaves ``A_r`` through a face at a member, that point is the boundary, found with one
+    test; otherwise the pair is bisected ``refine`` times.
     """
     ms = oracle.ms
     a_bar = ms.a_bar
@@ -702,9 +1104,28 @@ def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int 
             for km in np.flatnonzero(member):
                 jm = int(others[int(np.argmax(cos[km, others]))])
                 pairs.append((int(km), jm))
+        faces = _allowable_faces(ms)
         for k, j in pairs[:64]:
             a, b = Ut[k], Ut[j]
             in_a = bool(member[k])
+            # a boundary on a face of the allowable cone is resolved exactly: one test where the
+            # arc leaves the cone; the bisection is only needed when that point is not a member
+            if faces is not None and tests[j if in_a else k].reason.startswith("not allowable"):
+                inner, outer = (a, b) if in_a else (b, a)
+                m = _face_crossing(faces, inner, outer)
+                if m is not None:
+                    seen = np.flatnonzero(Ut @ m > 1 - 1e-12)  # (a_bar = 2: a generator of A_r, tested)
+                    if seen.size:
+                        t = tests[int(seen[0])]
+                    else:
+                        t = oracle.test(ms.Lambda_r_t @ m, witness=False)
+                        new.append(t)
+                    if t.member:
+                        continue
+                    if in_a:
+                        b = m
+                    else:
+                        a = m
             for _ in range(refine):
                 m = a + b
                 if np.linalg.norm(m) < 1e-12:

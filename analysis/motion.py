@@ -10,6 +10,10 @@ from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection, constrained_matrices
 from analysis.linalg import null_space, orth, pinv
 
+#: Rows of ``B = A_d Phi_full`` with a norm at most this are zero (:attr:`MotionSpace.B`): the
+#: allowability tolerance of a unit motion (``ALLOW_TOL`` of :mod:`analysis.dafc`).
+NULL_ROW_TOL = 1e-7
+
 
 @dataclass(frozen=True)
 class MotionSpace:
@@ -65,8 +69,19 @@ class MotionSpace:
 
     @property
     def B(self) -> Array:
-        """``A_d Phi_full``: ``(#D, a)``; the allowable set is ``{dzeta_c : B dzeta_c <= 0}`` (eq. 20)."""
-        return self.A_d @ self.Phi_full
+        """``A_d Phi_full``: ``(#D, a)``; the allowable set is ``{dzeta_c : B dzeta_c <= 0}`` (eq. 20).
+
+        A row whose norm is at most :data:`NULL_ROW_TOL` is set to zero: that D-point's normal
+        velocity is below the allowability tolerance for every unit motion (it can neither
+        separate nor penetrate; its constraint row lies, up to rounding, in the row space of
+        ``A_c``), so its sign is rounding noise. Kept, it cuts the allowable cone exactly (cdd)
+        while the membership test accepts it within the tolerance, and a 1e-9 change of the
+        contact data can then empty the cone (issue 9: FDFFFFDDD of the Baxter touch example).
+        """
+        B = self.A_d @ self.Phi_full  # (#D, a)
+        if B.size:
+            B[np.linalg.norm(B, axis=1) <= NULL_ROW_TOL] = 0.0
+        return B
 
     @property
     def P_s(self) -> Array:

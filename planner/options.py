@@ -26,7 +26,8 @@ class PlannerOptions:
     separate_finger_contacts: bool = False
     #: object motions in which the contacts on fixed bodies slide (S, eq. 5, 11-12) while the
     #: fingers stick: ``None`` for pose goals only (where the object must get somewhere), or
-    #: always / never. Followed for disk and sphere objects (the sliding contact keeps touching).
+    #: always / never. Any object shape: disks and spheres keep touching by their radius, other
+    #: shapes (a box's corners on a table) keep the contact point on the fixed body.
     sliding_motions: bool | None = None
     #: longest object motion towards a goal pose, and length of a sliding motion (object sizes):
     #: the torque of T is chosen for the start of the motion (first order), so a longer way is
