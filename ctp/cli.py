@@ -44,6 +44,10 @@ err_console = Console(stderr=True)
 EXIT_NO_PLAN = 1  # ctp plan: no plan found
 EXIT_DROPPED = 1  # ctp simulate: the object was dropped (or the analysis failed)
 EXIT_OFF_PLAN = 3  # the replay ended outside its tolerance (ctp plan --replay: or dropped the object)
+#: plan replays: the self-motion posture rate (1/s) of sim.plan_replay.PlanSimulationOptions
+POSTURE_RATE = 50.0
+POSTURE_HELP = ("plan replays: 1/s at which the hand's self-motion (joint motions that move no contact) "
+                "is held to the planned posture during object motions; 0: pure torque control")
 
 
 def _fail(message: str, code: int = 2) -> NoReturn:
@@ -336,16 +340,27 @@ def _plan_scene(plan_path: Path, data: dict[str, Any], scene_path: Path | None) 
         _fail(f"{plan_path}: scene.{e}")
 
 
+def _replay_options(posture_rate: float) -> Any:
+    """:class:`sim.plan_replay.PlanSimulationOptions` with ``--posture-rate`` (checked: exit 2)."""
+    from sim.plan_replay import PlanSimulationOptions
+
+    try:
+        return PlanSimulationOptions(posture_rate=posture_rate)
+    except ValueError as e:
+        _fail(str(e).replace("posture_rate", "posture-rate", 1))
+
+
 def _simulate_plan_file(plan_path: Path, data: dict[str, Any], scene_path: Path | None,
-                        json_out: Path | None) -> None:
+                        json_out: Path | None, posture_rate: float) -> None:
     """``ctp simulate PLAN.json``: the continuous replay of :func:`sim.plan_replay.simulate_plan`.
     Exit code 0 when the replay meets the plan, 1 if the object was dropped, 2 for bad input, 3 if
     it ended outside the tolerance (position or rotation)."""
     from sim.plan_replay import simulate_plan
 
+    options = _replay_options(posture_rate)
     sc = _plan_scene(plan_path, data, scene_path)
     try:
-        rep = simulate_plan(sc, data)
+        rep = simulate_plan(sc, data, options=options)
     except SceneError as e:
         _fail(f"{plan_path}: {e}")
     except CTPError as e:
@@ -389,6 +404,7 @@ def simulate(
     json_out: Annotated[Path | None, typer.Option("--json", help="write the result to this JSON file")] = None,
     scene_file: Annotated[Path | None, typer.Option("--scene", help="plan files: the scene it was planned "
                                                                      "from (default: the file's 'scene')")] = None,
+    posture_rate: Annotated[float, typer.Option(help=POSTURE_HELP)] = POSTURE_RATE,
 ) -> None:
     """Replay joint torques in MuJoCo (quasi-static) and report the object's motion and contacts;
     or, given a plan file, replay the whole plan in one simulation and compare the final pose with
@@ -406,7 +422,7 @@ def simulate(
     if plan_data is not None:
         if combination is not None or torque is not None or direction is not None:
             _fail("combination/torque/direction: do not apply to a plan file")
-        _simulate_plan_file(scene, plan_data, scene_file, json_out)
+        _simulate_plan_file(scene, plan_data, scene_file, json_out, posture_rate)
         return
     if scene_file is not None:
         _fail(f"scene: --scene is for plan files; {scene} is not a plan (no 'steps')")
@@ -522,6 +538,7 @@ def plan(
     time_limit: Annotated[float | None, typer.Option(help="seconds for the search")] = None,
     out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
     replay: Annotated[bool, typer.Option(help="replay the whole plan in MuJoCo (one continuous simulation)")] = False,
+    posture_rate: Annotated[float, typer.Option(help="--replay: " + POSTURE_HELP)] = POSTURE_RATE,
 ) -> None:
     """Plan contact-state transitions from the scene's grasp to a goal: active or passive closure,
     fingertip contacts only, a combination (one letter per scene contact: D released, the others
@@ -591,7 +608,7 @@ def plan(
         from sim.plan_replay import simulate_plan
 
         try:
-            rep = simulate_plan(sc, result)
+            rep = simulate_plan(sc, result, options=_replay_options(posture_rate))
         except CTPError as e:
             _fail(f"replay: {e}", code=1)
         _print_plan_simulation(rep)

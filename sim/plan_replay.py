@@ -173,12 +173,16 @@ class PlanSimulationOptions:
     #: 1/s; > 0 adds to the torque-controlled joints a posture torque on the hand's self-motion only
     #: (:func:`sim.torque_replay.self_motion_torque`, gains ``posture_rate * b_q``: the self-motion
     #: returns to the planned posture at this rate), which no contact force can balance and which
-    #: vanishes on the planned path; 0 (default): pure torque control, the paper's model
-    posture_rate: float = 0.0
+    #: vanishes on the planned path, as a whole-arm controller holds a redundant arm's posture
+    #: (without it the Panda's push loses the box: its self-motion is unstable under constant
+    #: torques); 0: pure torque control, the paper's model alone
+    posture_rate: float = 50.0
 
     def __post_init__(self) -> None:
         if not self.path_interval > 0:
             raise ValueError(f"path_interval: must be positive (got {self.path_interval!r})")
+        if not (self.posture_rate >= 0 and np.isfinite(self.posture_rate)):
+            raise ValueError(f"posture_rate: must be a finite rate >= 0 in 1/s (got {self.posture_rate!r})")
 
 
 DEFAULT_OPTIONS = PlanSimulationOptions()
