@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from mesh_files import write_box_stl
 
 from analysis.detect import FEATURE_TOL, Detection, UnplacedScene, detect_contacts
 from analysis.exceptions import SceneError
@@ -387,24 +388,6 @@ def test_capsules_lying_on_faces_of_turned_boxes() -> None:
 # SceneGeometry: the same geometry for repeated queries (the planner's collision checks)
 
 
-def _box_stl_text(half: np.ndarray) -> str:
-    """An ASCII STL of the box ``|x_k| <= half_k`` (each face two triangles)."""
-    lines = ["solid box"]
-    for k in range(3):
-        i, j = [m for m in range(3) if m != k]
-        for s in (-1.0, 1.0):
-            ring = []
-            for u, v in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
-                x = np.zeros(3)
-                x[k], x[i], x[j] = s * half[k], u * half[i], v * half[j]
-                ring.append(x)
-            for tri in ((ring[0], ring[1], ring[2]), (ring[0], ring[2], ring[3])):
-                lines.append("facet normal 0 0 0\nouter loop")
-                lines += [f"vertex {x[0]} {x[1]} {x[2]}" for x in tri]
-                lines.append("endloop\nendfacet")
-    return "\n".join([*lines, "endsolid box"]) + "\n"
-
-
 def test_scene_geometry_sphere_object_at_any_pose_is_exact() -> None:
     from analysis.detect import SceneGeometry
     from analysis.kinematics import BodyRef, HandKinematics
@@ -440,7 +423,7 @@ def test_scene_geometry_mesh_queries_do_not_keep_an_earlier_penetration(tmp_path
 
     stl = tmp_path / "box.stl"
     half = np.array([0.1, 0.15, 0.05])
-    stl.write_text(_box_stl_text(half))
+    write_box_stl(stl, half)
     data = _scene3({"type": "mesh", "file": str(stl)}, [_rod("f", [0.0, 0.0, 0.2], [0.0, 0.0, 0.3], 0.01)])
     scene = UnplacedScene.model_validate(data)
     geo = SceneGeometry(scene, HandKinematics.from_scene(scene))

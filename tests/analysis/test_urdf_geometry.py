@@ -15,6 +15,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 import pytest
+from mesh_files import write_box_stl
 
 from analysis.detect import UnplacedScene, detect_contacts, link_distances
 from analysis.exceptions import SceneError
@@ -162,27 +163,6 @@ def test_urdf_geometry_is_not_the_capsules() -> None:
     assert max(abs(a - b) for a, b in zip(d_cap, d_geo, strict=True)) > 1e-3
 
 
-def _box_stl(path: Path, half: np.ndarray) -> None:
-    """An ASCII STL of the box ``|x_k| <= half_k``: each face two triangles."""
-    lines = ["solid box"]
-    for k in range(3):
-        i, j = [m for m in range(3) if m != k]
-        for s in (-1.0, 1.0):
-            ring = []
-            for u, v in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
-                x = np.zeros(3)
-                x[k], x[i], x[j] = s * half[k], u * half[i], v * half[j]
-                ring.append(x)
-            n = np.zeros(3)
-            n[k] = s
-            for tri in ((ring[0], ring[1], ring[2]), (ring[0], ring[2], ring[3])):
-                lines.append(f"facet normal {n[0]} {n[1]} {n[2]}\nouter loop")
-                lines += [f"vertex {x[0]} {x[1]} {x[2]}" for x in tri]
-                lines.append("endloop\nendfacet")
-    lines.append("endsolid box")
-    path.write_text("\n".join(lines) + "\n")
-
-
 def _rod(name: str, a: Any, b: Any, radius: float) -> dict[str, Any]:
     a, b = np.asarray(a, float), np.asarray(b, float)
     return {"name": name, "base": {"position": a.tolist()},
@@ -193,7 +173,7 @@ def _rod(name: str, a: Any, b: Any, radius: float) -> dict[str, Any]:
 def test_mesh_object_is_the_box_it_describes(tmp_path: Path) -> None:
     half = np.array([0.1, 0.15, 0.05])
     stl = tmp_path / "box.stl"
-    _box_stl(stl, half)
+    write_box_stl(stl, half)
     hull = load_mesh(str(stl))
     assert len(hull.vertices) == 8
     rng = np.random.default_rng(3)

@@ -16,6 +16,7 @@ import coal
 import numpy as np
 import pinocchio as pin
 import pytest
+from mesh_files import write_box_stl
 
 from analysis.detect import UnplacedScene, link_distances
 from analysis.geometry import object_pose
@@ -339,25 +340,6 @@ def test_lipschitz_bound_of_urdf_links_holds_for_their_shapes() -> None:
 # A mesh object (before: not seen by the planner at all)
 
 
-def _box_stl(path: Path, half: np.ndarray) -> None:
-    """An ASCII STL of the box ``|x_k| <= half_k``: each face two triangles."""
-    lines = ["solid box"]
-    for k in range(3):
-        i, j = [m for m in range(3) if m != k]
-        for s in (-1.0, 1.0):
-            ring = []
-            for u, v in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
-                x = np.zeros(3)
-                x[k], x[i], x[j] = s * half[k], u * half[i], v * half[j]
-                ring.append(x)
-            for tri in ((ring[0], ring[1], ring[2]), (ring[0], ring[2], ring[3])):
-                lines.append(f"facet normal {s * (k == 0)} {s * (k == 1)} {s * (k == 2)}\nouter loop")
-                lines += [f"vertex {x[0]} {x[1]} {x[2]}" for x in tri]
-                lines.append("endloop\nendfacet")
-    lines.append("endsolid box")
-    path.write_text("\n".join(lines) + "\n")
-
-
 def _mesh_scene(stl: Path) -> dict[str, Any]:
     """Two capsule rods over a mesh box (turned 45 degrees about z) standing on a table."""
     def rod(name: str, a: list[float], tip: list[float]) -> dict[str, Any]:
@@ -379,7 +361,7 @@ def _mesh_scene(stl: Path) -> dict[str, Any]:
 def test_mesh_object_clearance_is_the_exact_box_distance(tmp_path: Path) -> None:
     half = np.array([0.1, 0.15, 0.05])
     stl = tmp_path / "box.stl"
-    _box_stl(stl, half)
+    write_box_stl(stl, half)
     scene = UnplacedScene.model_validate(_mesh_scene(stl))
     hand = HandKinematics.from_scene(scene)
     model = CollisionModel.of(scene, hand)
@@ -415,7 +397,7 @@ def test_mesh_object_clearance_is_the_exact_box_distance(tmp_path: Path) -> None
 
 def test_mesh_object_scene_at_the_detectors_pose_equals_link_distances(tmp_path: Path) -> None:
     stl = tmp_path / "box.stl"
-    _box_stl(stl, np.array([0.1, 0.15, 0.05]))
+    write_box_stl(stl, np.array([0.1, 0.15, 0.05]))
     scene = UnplacedScene.model_validate(_mesh_scene(stl))
     hand = HandKinematics.from_scene(scene)
     model = CollisionModel.of(scene, hand)
