@@ -23,6 +23,7 @@ reports ``exact = False``.
 from __future__ import annotations
 
 import heapq
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -44,6 +45,15 @@ from analysis.torque_conditions import torque_conditions
 ALLOW_TOL = NULL_ROW_TOL
 #: An S-point "really slides" when its slip exceeds this fraction of the motion size.
 SLIP_TOL = 1e-7
+#: Earlier relaxed-LP maximisers kept per oracle as lower bounds (:meth:`DAFCOracle.relaxed_positive`),
+#: and the margin (units of the force scale per unit motion) by which such a bound must clear the
+#: work threshold to decide without an LP.
+RELAXED_POINTS = 32
+RELAXED_MARGIN = 1e-3
+#: Farkas certificates of non-allowable directions kept per oracle (:meth:`DAFCOracle.redundancy_for`),
+#: and by how much (relative to the motion's size) ``y^T b`` must be negative to decide without an LP.
+FARKAS_POINTS = 16
+FARKAS_MARGIN = 1e-6
 
 SEMANTICS: dict[str, str] = {
     "dafc_unknowns": "total contact forces f_c; membership does not depend on the stationary solution",
@@ -104,34 +114,78 @@ class DAFCOracle:
         self.undecided = 0  # force LPs that ended numerically undecided (degenerate data)
         self.sector_boxes = 0  # boxes of the slip-sector search (:func:`slip_sector_search`)
         self.sector_open = 0  # of them, left open (resolution or budget): emptiness not proven there
+        # per-combination constants of the direction loop (they do not change between directions)
+        self._Lr = ms.Lambda_r_t  # (D, a_bar)
+        self._B_u, self._B_r = self.B[:, :a_bar], self.B[:, a_bar:]  # (#D, a_bar), (#D, r)
+        self._B_r_any = bool(np.any(self._B_r))
+        self._s_cols = np.array([sel.c_slices[i].start for i in sel.s_index], dtype=int)  # (#S,)
+        # friction per unit normal force and unit slip of each S-point on the object: G_i (D, d)
+        self._s_G = [system.G_blocks[i] for i in sel.s_index]
+        self._s_mu = [float(system.mu[i]) for i in sel.s_index]
+        self._XiT = np.ascontiguousarray(self.Xi.T)  # (p, D)
+        # optimal points of the relaxed LP solved so far, as wrenches in units of F0: a lower bound
+        # of the relaxed supremum for every other direction (:meth:`relaxed_positive`)
+        self._relaxed_W = np.zeros((system.D, 0))  # (D, k)
+        # Farkas certificates y (k, #D) of directions the redundancy cannot make allowable
+        self._farkas = np.zeros((0, self.B.shape[0]))
+        self._farkas_lp: LPModel | None = None
 
     # -- kinematics -----------------------------------------------------------------------------
 
     def redundancy_for(self, u: Array) -> Array | None:
         """Least-L1 redundancy ``dzeta~_r`` making ``[u; dzeta~_r]`` allowable (eq. 20), or None."""
         ms = self.ms
-        a_bar, nr = ms.a_bar, ms.n_redundant
-        B_u, B_r = self.B[:, :a_bar], self.B[:, a_bar:]
-        rhs = -(B_u @ u)  # (#D,)
+        nr = ms.n_redundant
+        B_r = self._B_r
+        rhs = -(self._B_u @ u)  # (#D,)
         if self.B.shape[0] == 0:
             return np.zeros(nr)
-        tol = ALLOW_TOL * max(1.0, float(np.linalg.norm(u)))
-        if np.all(rhs >= -tol):
+        tol = ALLOW_TOL * max(1.0, _norm(u))
+        if bool((rhs >= -tol).all()):
             return np.zeros(nr)  # zero redundancy is allowable: the least-L1 choice
-        if nr == 0 or not np.any(B_r):
+        if nr == 0 or not self._B_r_any:
             return None
         # z = [z+ ; z-] >= 0, zeta = z+ - z-, minimise sum(z); one model per oracle, solved cold
         # so that the redundancy chosen for a direction does not depend on earlier directions
+        b = rhs + tol / 2  # (#D,) half the tolerance: the check below has slack
+        margin = FARKAS_MARGIN * max(1.0, _norm(u))
+        if self._farkas.shape[0] and float(np.min(self._farkas @ b)) < -margin:
+            return None  # an earlier Farkas certificate proves B_r z <= b infeasible (no LP needed)
         if self._redundancy is None:
-            self._redundancy = LPModel(2 * nr, A_ub=np.hstack([B_r, -B_r]), b_ub=rhs + tol / 2, lb=0.0)
+            self._redundancy = LPModel(2 * nr, A_ub=np.hstack([B_r, -B_r]), b_ub=b, lb=0.0)
         else:
-            self._redundancy.set_ub_rhs(rhs + tol / 2)  # half the tolerance: the check below has slack
+            self._redundancy.set_ub_rhs(b)
         res = self._redundancy.solve_cold(np.ones(2 * nr))
         self.lp_count += 1
         if res.status != "optimal":
+            self._harvest_farkas(b, margin)
             return None
         assert res.x is not None
         return res.x[:nr] - res.x[nr:]
+
+    def _harvest_farkas(self, b: Array, margin: float) -> None:
+        """Keep a Farkas certificate of the infeasible ``B_r z <= b`` (z free) for later directions:
+        ``y >= 0``, ``sum y = 1``, ``B_r^T y = 0`` with ``y^T b < 0`` (then no ``z`` exists, since
+        ``0 = y^T B_r z <= y^T b < 0``), the minimiser of ``y^T b`` (an LP). Stored only when it clears
+        ``-margin`` and its residual ``|B_r^T y|_inf`` is at rounding level."""
+        if self._farkas.shape[0] >= FARKAS_POINTS:
+            return
+        B_r = self._B_r  # (#D, r)
+        m = B_r.shape[0]
+        if self._farkas_lp is None:
+            self._farkas_lp = LPModel(m, A_eq=np.vstack([B_r.T, np.ones((1, m))]),
+                                      b_eq=np.r_[np.zeros(B_r.shape[1]), 1.0], lb=0.0)
+        try:
+            res = self._farkas_lp.solve(b)
+        except SolverError:
+            return  # no certificate: later directions are decided by their own LP
+        self.lp_count += 1
+        if res.status != "optimal" or res.x is None:
+            return
+        y = np.maximum(res.x, 0.0)  # (#D,)
+        y = y / float(y.sum())
+        if float(np.max(np.abs(B_r.T @ y), initial=0.0)) <= 1e-12 and float(y @ b) < -margin:
+            self._farkas = np.vstack([self._farkas, y[None, :]])
 
     def slips_of(self, zeta_c: Array) -> Array:
         """Slip of each S-point ``(#S, d)`` for the motion ``dzeta_c`` (eq. 21)."""
@@ -192,8 +246,28 @@ class DAFCOracle:
             return -np.inf
         if res.status != "optimal":  # the grip bound bounds every force
             raise SolverError("HiGHS", f"relaxed DAFC LP ended '{res.status}' although its forces are bounded")
-        assert res.objective is not None
+        assert res.objective is not None and res.x is not None
+        if self._relaxed_W.shape[1] < RELAXED_POINTS:
+            w = self._G_relaxed @ res.x  # (D,) the maximiser's wrench, units of F0
+            if not np.any(np.all(np.abs(self._relaxed_W - w[:, None]) <= 1e-12, axis=0)):
+                self._relaxed_W = np.hstack([self._relaxed_W, w[:, None]])
         return float(res.objective * self.system.scales.force + dr @ self.system.w_ex)
+
+    def relaxed_positive(self, dr: Array) -> bool:
+        """``relaxed_work_sup(dr) > work_tol(dr)``, decided without an LP where possible.
+
+        Every maximiser of an earlier relaxed LP is a feasible point of the same LP (its rows do
+        not depend on ``dr``), so its work along ``dr`` bounds the supremum from below. When that
+        bound exceeds the threshold by a margin (:data:`RELAXED_MARGIN` x the force scale per unit
+        motion, far above the LP tolerances' effect on the work) the answer is yes, exactly as the
+        LP's; otherwise the LP decides."""
+        sc = self.system.scales
+        tol = sc.work_tol(dr)
+        if self._relaxed_W.shape[1]:
+            lower = float(np.max(dr @ self._relaxed_W)) * sc.force + float(dr @ self.system.w_ex)
+            if lower > tol + RELAXED_MARGIN * sc.force * sc.motion_size(dr):
+                return True
+        return self.relaxed_work_sup(dr) > tol
 
     def _force_lp(self) -> LPModel:
         """The force LP of (22), built once per combination: friction rows and the passive
@@ -212,6 +286,19 @@ class DAFCOracle:
             )
         return self._lp
 
+    def _effective_G(self, slip: Array) -> Array:
+        """``G_c + G_w`` ``(D, L_c)`` for the S-point slips ``(#S, d)``: the wrench columns of
+        :func:`analysis.friction.kinetic_friction` (eq. 12, same arithmetic) without its joint part."""
+        G_eff = self.st.G_c.copy()  # (D, L_c)
+        for k, (i, G_i, mu) in enumerate(zip(self.sel.s_index, self._s_G, self._s_mu, strict=True)):
+            sk = slip[k]  # (d,)
+            norm = math.sqrt(float(sk @ sk))
+            if norm == 0.0:
+                raise ValueError(f"S-point {i} has zero slip: kinetic friction direction undefined")
+            col = int(self._s_cols[k])
+            G_eff[:, col] = G_eff[:, col] + G_i @ (-mu * (sk / norm))
+        return G_eff
+
     def work_sup(self, dr: Array, zeta_c: Array, witness: bool = True) -> tuple[float, Array | None]:
         """``sup dr^T (G_c f + w_s + w_ex)`` over the admissible forces for the motion ``zeta_c``."""
         st = self.st
@@ -222,11 +309,10 @@ class DAFCOracle:
             model = self._force_lp()
             G_eff = st.G_c
         else:
-            kf = kinetic_friction(self.system, self.sel, self.slips_of(zeta_c))
-            G_eff = st.G_c + kf.G_w
+            G_eff = self._effective_G(self.slips_of(zeta_c))
             model = self._force_lp()
-            s_cols = np.array([self.sel.c_slices[i].start for i in self.sel.s_index])
-            E = snap(self.Xi.T @ G_eff[:, s_cols])  # (p, #S), noise-level entries zero as in the base rows
+            s_cols = self._s_cols
+            E = snap(self._XiT @ G_eff[:, s_cols])  # (p, #S), noise-level entries zero as in the base rows
             rows, cols = np.indices(E.shape)
             model.change_coefficients(rows.ravel() + model.n_ub, s_cols[cols.ravel()], E.ravel())
         if G_eff.shape[1] == 0:
@@ -308,18 +394,19 @@ class DAFCOracle:
         """
         ms = self.ms
         dr = np.asarray(dr, dtype=float)
-        u = ms.coordinates(dr)
-        nu = float(np.linalg.norm(u))
+        Lr = self._Lr  # (D, a_bar)
+        u = Lr.T @ dr  # (a_bar,) coordinates (MotionSpace.coordinates)
+        nu = _norm(u)
         if ms.a_bar == 0:
             return DirectionTest(dr, u, None, False, np.nan, "object cannot move (motion space is {0})", True)
         if nu < 1e-12:
             return DirectionTest(dr, u, None, False, np.nan, "direction is outside the motion space", True)
-        if float(np.linalg.norm(ms.Lambda_r_t @ u - dr)) > 1e-6 * max(1.0, float(np.linalg.norm(dr))):
+        if _norm(Lr @ u - dr) > 1e-6 * max(1.0, _norm(dr)):
             return DirectionTest(dr, u, None, False, np.nan, "direction is outside the motion space", True)
         u = u / nu
-        dr = ms.Lambda_r_t @ u
+        dr = Lr @ u
         sc = self.system.scales
-        if screen and self.sel.s_index and zeta_r is None and self.relaxed_work_sup(dr) <= sc.work_tol(dr):
+        if screen and self.sel.s_index and zeta_r is None and not self.relaxed_positive(dr):
             return DirectionTest(dr, u, None, False, np.nan,
                                  "the fingers cannot do positive work, whatever the S-points' slip", True)
         candidates: list[Array] = []
@@ -338,15 +425,17 @@ class DAFCOracle:
             else:
                 candidates.append(z0)
         last: DirectionTest | None = None
+        work_tol = sc.work_tol(dr)
         for zr in candidates:
             zc = ms.zeta_c(u, zr)
-            if self.B.shape[0] and np.any(self.B @ zc > ALLOW_TOL * max(1.0, float(np.linalg.norm(zc)))):
+            n_zc = _norm(zc)
+            if self.B.shape[0] and bool((self.B @ zc > ALLOW_TOL * max(1.0, n_zc)).any()):
                 last = DirectionTest(dr, u, zc, False, np.nan, "not allowable: a D-point would penetrate",
                                      self.exact)
                 continue
             if self.sel.s_index:
                 sl = self.slips_of(zc)
-                small = np.linalg.norm(sl, axis=1) <= SLIP_TOL * float(np.linalg.norm(zc))
+                small = np.sqrt((sl * sl).sum(axis=1)) <= SLIP_TOL * n_zc  # (#S,) |slip| as np.linalg.norm(axis=1)
                 still = [self.sel.s_index[k] for k in np.flatnonzero(small)]
                 if still:
                     last = DirectionTest(dr, u, zc, False, np.nan,
@@ -357,11 +446,11 @@ class DAFCOracle:
                 last = DirectionTest(dr, u, zc, False, np.nan, "degenerate: the force LP is numerically undecided",
                                      False)
                 continue
-            if sup > sc.work_tol(dr):
+            if sup > work_tol:
                 return DirectionTest(dr, u, zc, True, sup, "member", self.exact, f)
             why = ("the fingers cannot do positive work" if sup <= sc.work_zero(dr) else
                    "degenerate: the largest work is positive but below the tolerance "
-                   f"({sup:.3g} <= {sc.work_tol(dr):.3g})")
+                   f"({sup:.3g} <= {work_tol:.3g})")
             last = DirectionTest(dr, u, zc, False, sup, why, self.exact, f)
         assert last is not None
         return last
@@ -435,6 +524,11 @@ class DAFCOracle:
             if not self.B.shape[0] or np.all(self.B @ zc <= ALLOW_TOL * max(1.0, float(np.linalg.norm(zc)))):
                 out.append(z)
         return out
+
+
+def _norm(v: Array) -> float:
+    """``float(np.linalg.norm(v))`` of a real vector (the same ``sqrt(v . v)``), without its overhead."""
+    return math.sqrt(float(v @ v))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -704,11 +798,16 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
         Z, U = Z[moving], U[moving]
         bounds = np.full(len(U), -np.inf)
         targets: list[list[Array]] = []
-        for j, u in enumerate(U):
-            dr = ms.Lambda_r_t @ (u / np.linalg.norm(u))
-            ub, tg = _relaxed_box_lp(oracle, dr, G0, list(range(nS)), box)
-            bounds[j] = ub - sy.scales.work_tol(dr)
-            targets.append(tg)
+        try:
+            for j, u in enumerate(U):
+                dr = ms.Lambda_r_t @ (u / np.linalg.norm(u))
+                ub, tg = _relaxed_box_lp(oracle, dr, G0, list(range(nS)), box)
+                bounds[j] = ub - sy.scales.work_tol(dr)
+                targets.append(tg)
+        except SolverError:
+            open_boxes += 1  # HiGHS left a bound of this box undecided: open, never called empty
+            open_bound = np.inf
+            continue
         if bounds.max() <= 0.0:
             continue  # no relaxed force does positive work along any generator: no member here
         centre = Z.sum(axis=0)
@@ -726,7 +825,10 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
             u_c = centre[:a_bar]
             if a_bar > 1 and float(np.linalg.norm(u_c)) > 1e-9:
                 u_c = u_c / np.linalg.norm(u_c)
-                _, tg = _relaxed_box_lp(oracle, ms.Lambda_r_t @ u_c, G0, list(range(nS)), box)
+                try:
+                    _, tg = _relaxed_box_lp(oracle, ms.Lambda_r_t @ u_c, G0, list(range(nS)), box)
+                except SolverError:
+                    tg = []  # undecided: this one candidate is not tried
                 z = _box_motion(oracle, u_c, list(range(nS)), box, tg) if tg else None
                 if z is not None:
                     cands.append(np.r_[u_c, z])
@@ -955,9 +1057,7 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     if t is not None:
         return t, cone_dim, False
     # (1) relaxation: exact emptiness certificate
-    sc = oracle.system.scales
-    positive = [u for u in generators
-                if oracle.relaxed_work_sup(ms.Lambda_r_t @ u) > sc.work_tol(ms.Lambda_r_t @ u)]
+    positive = [u for u in generators if oracle.relaxed_positive(ms.Lambda_r_t @ u)]
     if not positive:
         return None, 0, True
     # (2) the interior samples again with the full redundancy search, then the generators

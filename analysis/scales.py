@@ -18,7 +18,9 @@ physical units, never on a threshold relative to the largest value of that solut
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -88,13 +90,25 @@ class Scales:
         """Largest component of a wrench residual, in units of F0."""
         return float(np.max(np.abs(np.asarray(w, dtype=float) * self.wrench_weights()), initial=0.0))
 
+    @cached_property
+    def _motion_weights(self) -> Array:
+        """:meth:`motion_weights`, computed once (the work thresholds are asked per direction)."""
+        w = self.motion_weights()  # (D,)
+        w.setflags(write=False)
+        return w
+
+    def motion_size(self, dr: Array) -> float:
+        """``|(v, l omega)|`` of the object motion ``dr`` [m] (the Euclidean norm, as ``np.linalg.norm``)."""
+        v = np.asarray(dr, dtype=float) * self._motion_weights  # (D,)
+        return math.sqrt(float(v @ v))
+
     def work_tol(self, dr: Array) -> float:
         """Positive-work threshold [J per unit motion] for the object motion ``dr``."""
-        return WORK_TOL * self.force * float(np.linalg.norm(np.asarray(dr, dtype=float) * self.motion_weights()))
+        return WORK_TOL * self.force * self.motion_size(dr)
 
     def work_zero(self, dr: Array) -> float:
         """Work below which a supremum is zero for ``dr`` (same units as :meth:`work_tol`)."""
-        return WORK_ZERO * self.force * float(np.linalg.norm(np.asarray(dr, dtype=float) * self.motion_weights()))
+        return WORK_ZERO * self.force * self.motion_size(dr)
 
     @property
     def force_tol(self) -> float:

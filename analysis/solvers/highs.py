@@ -213,13 +213,25 @@ class LPModel:
 
     def change_coefficients(self, rows: Array, cols: Array, values: Array) -> None:
         """Overwrite entries of the constraint matrix (rows index ``[A_ub; A_eq]``)."""
+        r_all = np.ravel(rows).astype(int)
+        c_all = np.ravel(cols).astype(int)
+        v_all = np.ravel(values).astype(float)
+        if not (len(r_all) == len(c_all) == len(v_all)):
+            raise ValueError("change_coefficients: rows, cols and values differ in length")
+        # entries already holding their value need no HiGHS call (the model is unchanged by it)
+        A_full = np.vstack([self.A_ub, self.A_eq])  # (m, n)
+        changed = A_full[r_all, c_all] != v_all
+        if len(np.unique(r_all * self.n + c_all)) < len(r_all):
+            changed[:] = True  # an entry named twice: every write in order, as given
+        if not changed.any():
+            return
         A_ub, A_eq = self.A_ub.copy(), self.A_eq.copy()
-        for r, c, v in zip(np.ravel(rows), np.ravel(cols), np.ravel(values), strict=True):
-            self._h.changeCoeff(int(r), int(c), float(v))
-            if int(r) < self._n_ub:
-                A_ub[int(r), int(c)] = float(v)
+        for r, c, v in zip(r_all[changed].tolist(), c_all[changed].tolist(), v_all[changed].tolist(), strict=True):
+            self._h.changeCoeff(r, c, v)
+            if r < self._n_ub:
+                A_ub[r, c] = v
             else:
-                A_eq[int(r) - self._n_ub, int(c)] = float(v)
+                A_eq[r - self._n_ub, c] = v
         self.A_ub, self.A_eq = A_ub, A_eq
 
     def use_defaults(self) -> None:

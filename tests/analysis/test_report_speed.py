@@ -120,3 +120,86 @@ def test_report_states_its_refinement(planar) -> None:
     out = analyze_combination(planar, "SSDFD").to_json()
     assert "allowable cone" in out["dafc"]["refinement"]
     assert len(out["dafc"]["directions"]) == len(out["dafc"]["member"]) == len(out["dafc"]["work"])
+
+
+# -- LP shortcuts of the DAFC oracle (issue 13): each decides exactly as the LP it replaces -------
+
+_SHORTCUT_COMBINATIONS = ("SSDSD", "SDDSD", "FSDSD", "SFDDS", "DSSDD", "SSSDD", "FFSDS", "SDSDS")
+
+
+def _seeded_directions(ms, n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    U = rng.standard_normal((n, ms.a_bar))
+    return (U / np.linalg.norm(U, axis=1, keepdims=True)) @ ms.Lambda_r_t.T  # (n, D)
+
+
+def test_relaxed_screen_without_lp_agrees_with_the_relaxed_lp(planar) -> None:
+    # the lower bound from earlier maximisers may only say "positive" where the LP says so too
+    shortcuts = 0
+    for comb in _SHORTCUT_COMBINATIONS:
+        parts = CombinationParts.build(planar, comb)
+        if parts.ms.a_bar == 0 or not parts.sel.s_index:
+            continue
+        oracle, fresh = parts.oracle(), parts.oracle()
+        for dr in _seeded_directions(parts.ms, 40, seed=3):
+            before = oracle.lp_count
+            fast = oracle.relaxed_positive(dr)
+            shortcuts += oracle.lp_count == before
+            sup = fresh.relaxed_work_sup(dr)
+            assert fast == (sup > planar.scales.work_tol(dr)), (comb, dr, sup)
+    assert shortcuts > 0  # the shortcut was taken at least once, so the comparison tested it
+
+
+def test_farkas_certificates_decide_allowability_as_the_redundancy_lp(planar) -> None:
+    proved = 0
+    for comb in _SHORTCUT_COMBINATIONS:
+        parts = CombinationParts.build(planar, comb)
+        ms = parts.ms
+        if ms.a_bar == 0 or not ms.n_redundant or parts.ms.B.shape[0] == 0:
+            continue
+        oracle = parts.oracle()
+        for dr in _seeded_directions(ms, 60, seed=5):
+            u = ms.coordinates(dr)
+            before = oracle.lp_count
+            z = oracle.redundancy_for(u)
+            if oracle.lp_count == before and z is None:
+                proved += 1
+            fresh = parts.oracle().redundancy_for(u)  # no certificates: decided by its own LP
+            assert (z is None) == (fresh is None), (comb, u)
+            if z is not None:
+                assert fresh is not None
+                np.testing.assert_allclose(z, fresh, rtol=0, atol=1e-12)
+        for y in oracle._farkas:  # each certificate: y >= 0, sum 1, y^T B_r = 0
+            assert np.all(y >= 0) and abs(y.sum() - 1.0) < 1e-12
+            assert np.max(np.abs(oracle._B_r.T @ y)) <= 1e-12
+    assert proved > 0
+
+
+def test_unchanged_coefficients_keep_the_model_and_its_answers() -> None:
+    from analysis.solvers.highs import LPModel, solve_lp
+
+    rng = np.random.default_rng(11)
+    A_ub = rng.standard_normal((6, 3))
+    b_ub = rng.random(6) + 0.5
+    A_eq = rng.standard_normal((1, 3))
+    model = LPModel(3, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=np.array([0.1]), lb=-2.0, ub=2.0)
+    c = rng.standard_normal(3)
+    model.solve(c, maximize=True)
+    # row 6 is the equality row: one entry unchanged, one changed
+    model.change_coefficients(np.array([6, 6, 0]), np.array([0, 1, 2]), np.array([A_eq[0, 0], 0.7, A_ub[0, 2]]))
+    A_eq2 = A_eq.copy()
+    A_eq2[0, 1] = 0.7
+    np.testing.assert_array_equal(model.A_eq, A_eq2)
+    np.testing.assert_array_equal(model.A_ub, A_ub)
+    res = model.solve(c, maximize=True)
+    ref = solve_lp(c, A_ub, b_ub, A_eq2, np.array([0.1]), -2.0, 2.0, maximize=True)
+    assert res.found and ref.found and res.objective is not None and ref.objective is not None
+    assert abs(res.objective - ref.objective) < 1e-9
+    assert res.is_optimal(1e-8)
+
+
+def test_work_threshold_is_the_weighted_euclidean_norm(planar) -> None:
+    sc = planar.scales
+    for dr in np.random.default_rng(2).standard_normal((20, planar.D)):
+        expected = 1e-6 * sc.force * float(np.linalg.norm(dr * sc.motion_weights()))
+        assert sc.work_tol(dr) == pytest.approx(expected, rel=1e-15, abs=0)
