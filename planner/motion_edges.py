@@ -1,7 +1,9 @@
 """Object-motion edges (paper eq. 30-32): the object moves along a DAFC direction.
 
 With the contacts of a set ``S_D`` in state D (by default the contacts on fixed bodies: the palm
-lets go), possibly the fixed-body contacts sliding (S: a disk or sphere on the palm, a box's
+lets go; towards a goal pose also the fixed-body contacts the straight motion to the goal lifts
+off, when that is some of them only: a box tipped about an edge, :func:`_goal_lifted_contacts`),
+possibly the fixed-body contacts sliding (S: a disk or sphere on the palm, a box's
 corners along the table) and the others F, the
 combination is feasible (18 and 22), the direction is a DAFC member, and the torque set T (32) is
 not empty; its recommended torque and the motion ``dzeta_c`` chosen by (31) move the object until
@@ -55,6 +57,9 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
         subsets = [fixed] if fixed and len(fixed) < L else []
     if goal.type == "pose":
         subsets.append(())
+        lifted = _goal_lifted_contacts(state, fixed, pose_goal_remaining(goal, state))
+        if lifted and lifted not in subsets:  # a pivot: the fixed contacts the goal lifts separate
+            subsets.append(lifted)
     plans: list[tuple[tuple[int, ...], tuple[int, ...]]] = [(dset, ()) for dset in subsets]  # (D-set, S-set)
     slide = options.sliding_motions
     if (goal.type == "pose" if slide is None else slide) and fixed and len(fixed) < L:
@@ -232,6 +237,32 @@ def _direction_candidates(nodes: GraphNodes, state: GraspState, p: Any, dset: tu
         if np.linalg.norm(c) > 1e-9:
             out.append(c / np.linalg.norm(c))
     return out
+
+
+#: a fixed contact separates towards the goal when its normal rate (per unit of the remaining
+#: displacement's norm) exceeds this; the contacts on the axis of a pivot have rate 0
+LIFT_RATE = 1e-3
+
+
+def _goal_lifted_contacts(state: GraspState, fixed: tuple[int, ...], rest: Array) -> tuple[int, ...]:
+    """The fixed-body contacts that the straight motion towards the goal, the twist ``rest`` ``(D,)``
+    (velocity of ``p_o`` and, in 3-D, the world angular velocity), lifts off their bodies: normal
+    rate ``n_i . (v + w x (x_i - p_o))`` (eq. 7 for a fixed body) above :data:`LIFT_RATE` times
+    ``|rest|``. For a box tipped about an edge, the corners off the pivot edge; ``()`` unless it is
+    a proper, non-empty subset of ``fixed`` (no pivot: all of them, or none, separate)."""
+    scale = float(np.linalg.norm(rest))
+    if scale <= 0 or len(fixed) < 2:
+        return ()
+    d = state.dim
+    v = rest[:d]  # (d,)
+    lifted = []
+    for i in fixed:
+        r = state.world_point(i) - state.position  # (d,)
+        # (d,) the point's velocity; planar: w x r = theta_dot (-r_y, r_x)
+        u = v + np.cross(rest[3:], r) if d == 3 else v + rest[2] * np.array([-r[1], r[0]])
+        if float(state.world_normal(i) @ u) > LIFT_RATE * scale:
+            lifted.append(i)
+    return tuple(lifted) if 0 < len(lifted) < len(fixed) else ()
 
 
 def _goal_distance(nodes: GraphNodes, state: GraspState, dr: Array) -> float:

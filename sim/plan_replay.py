@@ -166,7 +166,9 @@ class PlanSimulationOptions:
     joint_speed: float = 4.0
     min_move_time: float = 0.02  # shortest finger move (a release path is a few hundredths of a rad)
     settle_time: float = 0.02  # holding at the end of every step (and after the start ramp)
-    motion_time: float = 2.0  # an object motion gives up after this long (then reported short)
+    #: an object motion gives up after this long (then reported short): the quasi-static replay's speed
+    #: is its damping's, not the plan's; the Panda's pivot turns at about 0.02/s and needs ~6 s
+    motion_time: float = 8.0
     unloaded_time: float = 0.05  # no loaded contact for this long (while loaded) means dropped
     tolerance: float = 0.05  # relative position and rotation errors the replay must meet (PoseError)
     path_interval: float = 0.005  # simulated seconds between two samples of the object path (ObjectPath)
