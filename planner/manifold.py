@@ -62,19 +62,50 @@ class ContactManifold:
     object motions the contacts allow form a flat set the path is the line ``s = t dr``, where
     they form a curved one (two arms each holding the box with two links) it is the curve of
     that set tangent to ``dr``. OMPL's constrained planning on this manifold cannot take the
-    object elsewhere."""
+    object elsewhere.
+
+    With ``rolling=True`` (a 2-D disk only) a sticking contact on the side of a finger link rolls
+    instead of keeping its two points glued: the disk turning relative to the link moves the
+    contact point on both surfaces by the same arc length (rolling without slipping, exact, not
+    first order only). Its two rows are the gap ``|p_o - y(q)| - rho - r = 0`` (as a sliding
+    contact's) and the rolling row ``(sigma - sigma_0) + r (beta - beta_0) = 0``, ``sigma`` the
+    arc length of the contact point along the capsule's surface (counter-clockwise: ``-side t L``
+    on the side, plus ``rho psi`` round an end cap, ``psi`` the angle of ``u`` from the side's
+    normal) and ``beta`` the contact point's angle on the disk (object frame, counter-clockwise):
+    moving counter-clockwise on one surface is moving clockwise on the other. Their first-order
+    rows span the same space as the glued point's (equal velocities of the two material points),
+    so the tangent space at ``s = 0`` is still the motion space. A glued point pivots the disk
+    about it and, on a link's side, pushes it into the link by ``r (1 - cos dtheta)`` while the
+    true contact point moves by ``r dtheta``; at a sharp link tip (``rho = 0``) both agree, so
+    contacts at a link's end keep the glued rows. :meth:`rolling_contact` gives the contact after
+    a motion."""
 
     def __init__(self, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
                  sliding: Sequence[int] = (), scene: Scene | None = None, direction: Array | None = None,
-                 motion_space: Array | None = None):
+                 motion_space: Array | None = None, rolling: bool = False):
         self.hand, self.state, self.dim = hand, state, state.dim
         self.start: Pose = state.pose  # the object pose at s = 0
         self.M, self.D = hand.M, self.start.D
         self.items: list[tuple[BodyRef | None, Array, Array]] = []  # (finger body or None, point_body, point_obj)
+        #: rolling contacts: (contact index, link, side +-1, sigma_0, gamma_0)
+        self.rolls: list[tuple[int, BodyRef, float, float, float]] = []
+        self.radius = 0.0
+        if rolling:
+            if scene is None or self.dim != 2 or not isinstance(scene.object.shape, Disk):
+                raise SceneError(("object", "shape"), "rolling contacts are followed for 2-D disk objects only "
+                                 "(pass the scene of a planar disk)")
+            self.scene = scene
+            self.radius = float(scene.object.shape.radius)
         for i in sticking:
             c = state.contacts[i]
             ref = hand.resolve_body(c.body)
             assert ref is not None
+            if rolling and ref.finger is not None:
+                side = self._rolling_side(ref, state.q)
+                if side is not None:
+                    sig, gamma = self._roll_coords(ref, side, state.q, self.start)
+                    self.rolls.append((i, ref, side, sig, gamma))
+                    continue
             if ref.finger is None:  # a fixed body: its (world) point stays where it is
                 self.items.append((None, state.world_point(i), np.asarray(c.point_object, float)))
             else:
@@ -84,7 +115,6 @@ class ContactManifold:
         #: point ``(d,)`` (a vertex, edge or face corner of any other object on a fixed body: that point
         #: stays on the body's surface while it slides along it)
         self.sliding_points: list[Array | None] = []
-        self.radius = 0.0
         if sliding:
             if scene is None:
                 raise SceneError(("object", "shape"), "sliding contacts need the scene (its shapes)")
@@ -119,7 +149,9 @@ class ContactManifold:
             C = W - np.outer(u, u @ W)  # the motion space's directions, made orthogonal to u
             Uc, sv, _ = np.linalg.svd(C, full_matrices=False)
             self.complement = Uc[:, sv > 1e-9]  # (D, k)
-        self._base = self.dim * len(self.items) + len(self.sliding)
+        self._roll0 = self.dim * len(self.items)  # first rolling row
+        self._slide0 = self._roll0 + 2 * len(self.rolls)  # first sliding row
+        self._base = self._slide0 + len(self.sliding)
         #: rows of the contacts (without the direction's)
         self.contact_rows = self._base
         self.rows = self._base + self.complement.shape[1]
@@ -150,6 +182,57 @@ class ContactManifold:
         dist = float(np.linalg.norm(c - y))
         return dist - self.hand.body_radius(ref), (c - y) / max(dist, 1e-300), y
 
+    def _rolling_side(self, ref: BodyRef, q: Array) -> float | None:
+        """``+1`` (``-1``) when the disk at the start touches the left (right) side of the link's axis
+        ``a -> b``, ``None`` when its centre's foot point is at an end of the axis (the tip)."""
+        a, b = self.hand.body_segment(ref, q)
+        e, c = b[:2] - a[:2], self.start.position - a[:2]  # (2,), (2,)
+        t = float(c @ e / max(float(e @ e), 1e-300))
+        if not 1e-6 < t < 1 - 1e-6:
+            return None
+        return 1.0 if float(e[0] * c[1] - e[1] * c[0]) > 0 else -1.0
+
+    def _roll_coords(self, ref: BodyRef, side: float, q: Array, pose: Pose) -> tuple[float, float]:
+        """``(sigma, gamma)`` of the contact of the disk at ``pose`` with the link ``ref`` at ``q``: the
+        arc length along the link's surface (counter-clockwise, from the foot of its axis' start)
+        and the world angle of the touching point seen from the disk's centre (the point's angle on
+        the disk is ``beta = gamma - theta``, ``theta`` the disk's angle)."""
+        a, b = self.hand.body_segment(ref, q)
+        a, e = a[:2], b[:2] - a[:2]  # (2,), (2,)
+        L = float(np.linalg.norm(e))
+        eh = e / L
+        c = pose.position
+        t = float(np.clip((c - a) @ eh / L, 0.0, 1.0))
+        u = c - (a + t * L * eh)
+        u = u / max(float(np.linalg.norm(u)), 1e-300)  # from the axis towards the centre
+        n = side * np.array([-eh[1], eh[0]])  # the side's outward normal
+        psi = float(np.arctan2(n[0] * u[1] - n[1] * u[0], n @ u))
+        return -side * t * L + self.hand.body_radius(ref) * psi, float(np.arctan2(-u[1], -u[0]))
+
+    def _rolling_rows(self, x: Array) -> Array:
+        """``(2 n_roll,)``: per rolling contact its gap and its rolling row; ``beta - beta_0`` is the
+        touching point's turn seen from the centre (``gamma - gamma_0``, within half a turn) minus
+        the disk's turn ``s_theta`` (not wrapped: a disk may roll more than half a turn)."""
+        q, s = x[: self.M], x[self.M:]
+        pose = self.pose(s)
+        out = np.empty(2 * len(self.rolls))
+        for k, (_, ref, side, sig0, gamma0) in enumerate(self.rolls):
+            out[2 * k] = self.body_distance(ref, pose.position, q)[0] - self.radius
+            sig, gamma = self._roll_coords(ref, side, q, pose)
+            dbeta = (gamma - gamma0 + np.pi) % (2 * np.pi) - np.pi - s[2]
+            out[2 * k + 1] = (sig - sig0) + self.radius * dbeta
+        return out
+
+    def rolling_contact(self, k: int, x: Array) -> tuple[int, Array, Array, Array]:
+        """Rolling contact ``k`` at ``x``: its contact index, the touching point (world ``(2,)``), the
+        point on the disk and its inward normal (object frame ``(2,)``)."""
+        q, s = x[: self.M], x[self.M:]
+        pose = self.pose(s)
+        i, ref = self.rolls[k][0], self.rolls[k][1]
+        _, u, _ = self.body_distance(ref, pose.position, q)
+        y = pose.position - self.radius * u  # on both surfaces when the gap is zero
+        return i, y, pose.to_local(y), pose.R_d.T @ u
+
     def sliding_contact(self, k: int, x: Array) -> tuple[Array, Array, Array]:
         """Sliding contact ``k`` at ``x``: body point (world ``(d,)``), object point and inward normal
         (object frame ``(d,)``) where the body touches the disk or sphere."""
@@ -177,12 +260,14 @@ class ContactManifold:
         for k, (ref, pb, po) in enumerate(self.items):
             xb = pb[:d] if ref is None else self.hand.point_position(ref, pb, q)
             out[d * k: d * k + d] = xb - pose.to_world(po)
+        if self.rolls:
+            out[self._roll0: self._slide0] = self._rolling_rows(x)
         for k, ref in enumerate(self.sliding):  # S-points: the gap to the disk/sphere is zero
             c = self.sliding_points[k]
             if c is not None:  # an object point on a fixed body: its distance from the surface is zero
-                out[d * len(self.items) + k] = self.body_distance(ref, pose.to_world(c), q)[0]
+                out[self._slide0 + k] = self.body_distance(ref, pose.to_world(c), q)[0]
                 continue
-            out[d * len(self.items) + k] = self.body_distance(ref, pose.position, q)[0] - self.radius
+            out[self._slide0 + k] = self.body_distance(ref, pose.position, q)[0] - self.radius
         out[self._base:] = self.complement.T @ s  # on the line of the analysed direction
         return out
 
@@ -203,8 +288,13 @@ class ContactManifold:
                 J[r, self.M + 2] = -np.array([-y[1], y[0]])
             else:
                 J[r, self.M + 3:] = skew(y) @ _left_jacobian_so3(s[3:])
+        if self.rolls:  # central differences (h = 1e-7: errors ~1e-8 on smooth pieces)
+            h = 1e-7
+            J[self._roll0: self._slide0] = np.column_stack(
+                [(self._rolling_rows(x + h * e) - self._rolling_rows(x - h * e)) / (2 * h)
+                 for e in np.eye(self.M + self.D)])
         for k, ref in enumerate(self.sliding):  # d gap = u^T (d p_o - J(y) dq); the centre is p_o
-            row = d * len(self.items) + k
+            row = self._slide0 + k
             c = self.sliding_points[k]
             if c is not None:  # d gap = u^T d x_o, x_o = p_o + dp + R(s) c (the body is fixed)
                 _, u, _ = self.body_distance(ref, pose.to_world(c), q)
