@@ -120,8 +120,6 @@ class DAFCOracle:
         self._B_r_any = bool(np.any(self._B_r))
         self._s_cols = np.array([sel.c_slices[i].start for i in sel.s_index], dtype=int)  # (#S,)
         # friction per unit normal force and unit slip of each S-point on the object: G_i (D, d)
-        self._s_G = [system.G_blocks[i] for i in sel.s_index]
-        self._s_mu = [float(system.mu[i]) for i in sel.s_index]
         self._XiT = np.ascontiguousarray(self.Xi.T)  # (p, D)
         # optimal points of the relaxed LP solved so far, as wrenches in units of F0: a lower bound
         # of the relaxed supremum for every other direction (:meth:`relaxed_positive`)
@@ -286,19 +284,6 @@ class DAFCOracle:
             )
         return self._lp
 
-    def _effective_G(self, slip: Array) -> Array:
-        """``G_c + G_w`` ``(D, L_c)`` for the S-point slips ``(#S, d)``: the wrench columns of
-        :func:`analysis.friction.kinetic_friction` (eq. 12, same arithmetic) without its joint part."""
-        G_eff = self.st.G_c.copy()  # (D, L_c)
-        for k, (i, G_i, mu) in enumerate(zip(self.sel.s_index, self._s_G, self._s_mu, strict=True)):
-            sk = slip[k]  # (d,)
-            norm = math.sqrt(float(sk @ sk))
-            if norm == 0.0:
-                raise ValueError(f"S-point {i} has zero slip: kinetic friction direction undefined")
-            col = int(self._s_cols[k])
-            G_eff[:, col] = G_eff[:, col] + G_i @ (-mu * (sk / norm))
-        return G_eff
-
     def work_sup(self, dr: Array, zeta_c: Array, witness: bool = True) -> tuple[float, Array | None]:
         """``sup dr^T (G_c f + w_s + w_ex)`` over the admissible forces for the motion ``zeta_c``."""
         st = self.st
@@ -309,7 +294,7 @@ class DAFCOracle:
             model = self._force_lp()
             G_eff = st.G_c
         else:
-            G_eff = self._effective_G(self.slips_of(zeta_c))
+            G_eff = st.G_c + kinetic_friction(self.system, self.sel, self.slips_of(zeta_c)).G_w
             model = self._force_lp()
             s_cols = self._s_cols
             E = snap(self._XiT @ G_eff[:, s_cols])  # (p, #S), noise-level entries zero as in the base rows
