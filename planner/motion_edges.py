@@ -8,9 +8,11 @@ corners along the table) and the others F, the
 combination is feasible (18 and 22), the direction is a DAFC member, and the torque set T (32) is
 not empty; its recommended torque and the motion ``dzeta_c`` chosen by (31) move the object until
 the D-contacts have separated by ``clearance`` (towards a goal pose: at most ``motion_step``).
-The path of hand and object on the contact manifold ``A_c [dq; dr] = 0`` is integrated
+The path of hand and object on the contact manifold ``A_c [dq; dr] = 0`` (for a 2-D disk the
+contacts on a link's side rolling, :func:`~planner.object_motion.motion_manifold`) is integrated
 (:func:`~planner.object_motion.integrate_object_motion`) and then planned by OMPL's constrained
-planning (:func:`~planner.object_motion.plan_object_motion`).
+planning (:func:`~planner.object_motion.plan_object_motion`); the state after it has the sliding
+and the rolling contacts where the motion left them (new points on the body and the object).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from planner.object_motion import (
     integrate_object_motion,
     keep_contacts,
     plan_object_motion,
+    rolled_contacts,
 )
 from planner.state import GraspContact, GraspState
 from planner.transition import ObjectMotionFigures, Transition
@@ -121,7 +124,10 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
         if om is None:
             nodes.reject("OMPL found no collision-free object motion on the contact manifold")
             continue
-        end = state.with_contacts(_slid_contacts(nodes, state, sset, om), om.q_path[-1])
+        # sliding contacts where they slid, rolling ones (a disk on a link's side) where they rolled
+        slid = _slid_contacts(nodes, state, sset, om)
+        end = state.with_contacts(rolled_contacts(nodes.hand, nodes.scene, state, keep, om.q_path[-1],
+                                                  om.displacement_path[-1], slid), om.q_path[-1])
         final = end.with_pose(Pose.from_vector(om.pose_path[-1], state.dim))
         new = _turned_normals(nodes, keep_contacts(final, sorted(keep + list(sset)), om.q_path[-1]))
         if nodes.held(new) is None:

@@ -16,6 +16,12 @@ collisions (the links against the object, the fixed bodies and each other, and t
 the fixed bodies), and the solution densified on the manifold until no joint moves more than
 :data:`~planner.collision.DENSE_STEP` between checked states, each of which is checked again, and
 every segment of the object path within :data:`MIN_DIRECTION_COSINE` of ``dr``.
+
+For a 2-D disk object (:func:`rolls_on_links`) the sticking contacts on the side of a finger link
+roll (:class:`~planner.manifold.ContactManifold` with ``rolling=True``: the contact point moves by
+``r`` times the disk's turn relative to the link on both surfaces, exactly), those at a sharp link
+tip and on fixed bodies keep their glued points (exact there); :func:`rolled_contacts` gives the
+contacts where the motion leaves them.
 """
 
 from __future__ import annotations
@@ -36,7 +42,7 @@ from analysis.geometry import link_shapes, segment_normal_cone, shape_normal_con
 from analysis.kinematics import BodyRef, HandKinematics
 from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
-from analysis.scene import Scene
+from analysis.scene import Disk, Scene
 from planner.budget import CheckBudget
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel
 from planner.ik import joint_limits
@@ -57,6 +63,43 @@ class ObjectMotion:
     direction: Array | None = None
     #: ``(D, a~)`` the motion space's object directions it was followed in (None: every direction)
     motion_space: Array | None = None
+
+
+def rolls_on_links(scene: Scene) -> bool:
+    """Do the sticking contacts on a link's side roll in object motions? For a 2-D disk object
+    (:class:`~planner.manifold.ContactManifold` ``rolling=True``); 3-D spheres and cylinders roll
+    non-holonomically, which the planner does not follow (their contacts stay glued)."""
+    return scene.dim == 2 and isinstance(scene.object.shape, Disk)
+
+
+def motion_manifold(scene: Scene, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
+                    sliding: Sequence[int] = (), direction: Array | None = None,
+                    motion_space: Array | None = None) -> ContactManifold:
+    """The contact manifold an object motion from ``state`` follows (and :mod:`planner.verify`
+    checks): the sticking contacts glued (eq. 7), rolling on a link's side for a 2-D disk
+    (:func:`rolls_on_links`), the ``sliding`` ones touching (eq. 5)."""
+    return ContactManifold(hand, state, sticking, sliding, scene, direction=direction, motion_space=motion_space,
+                           rolling=rolls_on_links(scene))
+
+
+def rolled_contacts(hand: HandKinematics, scene: Scene, state: GraspState, sticking: Sequence[int], q: Array,
+                    s: Array, contacts: Sequence[GraspContact] | None = None) -> tuple[GraspContact, ...]:
+    """The contacts after an object motion from ``state`` that ends with the hand at ``q`` ``(M,)``
+    and the object at displacement ``s`` ``(D,)``: every rolling contact (a sticking contact on a
+    link's side of a 2-D disk, :func:`motion_manifold`) at its rolled point (new point on the link,
+    new point and inward normal on the disk, :meth:`ContactManifold.rolling_contact`), the others as
+    in ``contacts`` (default: ``state.contacts``)."""
+    out = list(state.contacts if contacts is None else contacts)
+    if not rolls_on_links(scene) or not sticking:
+        return tuple(out)
+    man = motion_manifold(scene, hand, state, sticking)
+    x = np.concatenate([np.asarray(q, dtype=float), np.asarray(s, dtype=float)])  # (M + D,)
+    for k in range(len(man.rolls)):
+        i, y, p_obj, n_obj = man.rolling_contact(k, x)
+        ref = man.rolls[k][1]
+        c = out[i]
+        out[i] = GraspContact(c.body, hand.to_local(ref, y, q), p_obj, n_obj, c.mu, c.origin)
+    return tuple(out)
 
 
 def project_contacts(
@@ -158,7 +201,7 @@ def integrate_object_motion(
     hand = model.hand
     dr = np.asarray(dr, dtype=float)
     dr = dr / np.linalg.norm(dr)
-    man = ContactManifold(hand, state, sticking, sliding, model.scene, direction=dr, motion_space=motion_space)
+    man = motion_manifold(model.scene, hand, state, sticking, sliding, direction=dr, motion_space=motion_space)
     x = np.concatenate([state.q, np.zeros(len(dr))])
     h = distance / steps
     cur = state
@@ -280,7 +323,7 @@ def plan_object_motion(
     direction = goal.direction
     if direction is None and float(np.linalg.norm(s1)) > 1e-12:
         direction = s1 / np.linalg.norm(s1)
-    man = ContactManifold(hand, state, sticking, sliding, model.scene, direction=direction,
+    man = motion_manifold(model.scene, hand, state, sticking, sliding, direction=direction,
                           motion_space=goal.motion_space)
     M, D = man.M, man.D
     n = M + D

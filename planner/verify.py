@@ -12,7 +12,11 @@ contact point lies on its body and on the object) and:
   together, S-points touching), the combination has a stationary grasp, the direction is a DAFC
   member (22 by the LP oracle), the torque set (32) for it is not empty, and the chosen torque's
   contact forces satisfy (32) (residuals); every segment of the object path lies within 0.99
-  cosine of that re-analysed direction (the object goes where its torque moves it), and densely
+  cosine of that re-analysed direction (the object goes where its torque moves it); for a 2-D disk
+  every sticking contact on a link's side rolls: at every waypoint the disk touches the link (gap
+  zero) and the arc the contact point travelled on the link equals ``r`` times the disk's turn
+  relative to the link, and the state after the step has the contact at the rolled point
+  (:func:`_rolling_problems`, from the positions alone); and densely
   (waypoints at most ``DENSE_STEP`` apart), at every waypoint, the object penetrates no fixed
   body and no link penetrates the object, a fixed body or another link;
 * every state after a step holds the object (18 for all-F).
@@ -29,11 +33,11 @@ from analysis.contacts import build_system
 from analysis.exceptions import CTPError
 from analysis.kinematics import BodyRef, HandKinematics
 from analysis.pose import Pose
-from analysis.scene import Scene
+from analysis.scene import Disk, Scene
 from analysis.torques import torque_set
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel, path_clearance_certified
-from planner.manifold import ContactManifold, pose_displacement
-from planner.object_motion import MIN_DIRECTION_COSINE, direction_cosines
+from planner.manifold import pose_displacement
+from planner.object_motion import MIN_DIRECTION_COSINE, direction_cosines, motion_manifold, rolls_on_links
 from planner.plan import Plan, PlanStep
 from planner.state import StateAnalysis, all_f
 
@@ -80,6 +84,7 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
         if grasp is None:
             return [*problems, f"{tag}: no stationary grasp (18) for {t.combination}"]
         problems.extend(_manifold_problems(scene, hand, step, tag))
+        problems.extend(_rolling_problems(scene, hand, step, tag))
         p = before.parts(t.combination)
         oracle = p.oracle()
         assert t.torque_set is not None
@@ -148,18 +153,114 @@ def _penetration_problems(scene: Scene, hand: HandKinematics, step: PlanStep, ta
 
 def _manifold_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
     """Every waypoint of an object motion lies on the contact manifold of its kept contacts (body
-    point = object point) and of its sliding ones (touching), eq. (7) to every order, within 1e-6.
+    point = object point; for a 2-D disk, rolling on a link's side: :func:`motion_manifold`) and of
+    its sliding ones (touching), eq. (7) to every order, within 1e-6.
     The sliding contacts are the step's ``sliding_contacts``, as the planner followed them."""
     t = step.transition
     sliding = [int(i) for i in getattr(t.figures, "sliding_contacts", ())]
     sticking = [i for i, ch in enumerate(t.combination) if ch != "D" and i not in sliding]
     try:
-        man = ContactManifold(hand, step.before, sticking, sliding, scene)
+        man = motion_manifold(scene, hand, step.before, sticking, sliding)
     except CTPError as e:
         return [f"{tag}: {e}"]
     worst = max(float(np.linalg.norm(man.function(np.concatenate([q, pose_displacement(step.before, pose)]))))
                 for q, pose in zip(t.q_path, t.object_path, strict=True))
     return [] if worst <= 1e-6 else [f"{tag}: path leaves the contact manifold (residual {worst:.2g})"]
+
+
+#: rolling kinematics of a step hold within this (scene units): the gap, the arc on the link
+#: against ``r`` times the relative turn, the rolled contact of the state after the step
+ROLL_TOL = 1e-6
+
+
+def _axis_foot(hand: HandKinematics, ref: BodyRef, q: Array, centre: Array) -> tuple[float, float, Array, float, float]:
+    """``(t, L, u, phi, dist)`` of the disk centre ``centre`` ``(2,)`` and the link ``ref`` at ``q``:
+    the centre's foot on the link's axis ``a -> b`` (fraction of it, unclipped), the axis' length,
+    the unit vector ``(2,)`` from the closest axis point to the centre, the axis' angle and the
+    centre's distance from the axis segment."""
+    a, b = hand.body_segment(ref, q)
+    e = b[:2] - a[:2]  # (2,)
+    L = float(np.linalg.norm(e))
+    t = float((centre - a[:2]) @ e) / (L * L)
+    v = centre - (a[:2] + min(max(t, 0.0), 1.0) * e)  # (2,)
+    dist = float(np.linalg.norm(v))
+    return t, L, v / dist, float(np.arctan2(e[1], e[0])), dist
+
+
+def _surface_arc(side: float, rho: float, t: float, L: float, u: Array, phi: float) -> float:
+    """Arc length of the touching point along a capsule's surface (counter-clockwise round it): on
+    the side ``side`` (``+1`` left of the axis) ``-side t L`` (``t`` clipped to the link), plus
+    ``rho psi`` round an end cap, ``psi`` the angle of ``u`` ``(2,)`` from the side's outward
+    normal (``phi`` the axis' angle)."""
+    n = side * np.array([-np.sin(phi), np.cos(phi)])  # (2,) the side's outward normal
+    psi = float(np.arctan2(n[0] * u[1] - n[1] * u[0], n @ u))
+    return -side * min(max(t, 0.0), 1.0) * L + rho * psi
+
+
+def _rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
+    """The rolling kinematics of an object motion of a 2-D disk (radius ``r``), from the positions
+    of the waypoints alone (not the planner's manifold): for every sticking contact on a finger
+    link whose disk centre at the start projects inside the link's axis ``a -> b`` (a side
+    contact, on the side ``side = +-1``), at every waypoint the centre ``c`` is ``rho + r`` from
+    the axis (gap zero) and the arc length the contact travelled on the link's surface,
+    ``sigma - sigma_0`` with ``sigma = -side t L + rho psi`` (``t`` the centre's foot on the axis,
+    clipped to the link; ``psi`` the angle rolled round an end cap; counter-clockwise round the
+    capsule), equals ``r`` times the disk's turn relative to the link, ``(theta - theta_0) -
+    (phi - phi_0)`` (``phi`` the axis' angle): rolling without slipping, the arc on the disk equal
+    to the arc on the link (a disk turning counter-clockwise on the link rolls clockwise round
+    it). The state after the step has the contact at the rolled point ``c - r u`` on the link and
+    on the disk (``u`` the unit vector from the axis to ``c``), all within :data:`ROLL_TOL`."""
+    if not rolls_on_links(scene):
+        return []
+    t = step.transition
+    shape = scene.object.shape
+    assert isinstance(shape, Disk)  # rolls_on_links
+    r = float(shape.radius)
+    sliding = {int(i) for i in getattr(t.figures, "sliding_contacts", ())}
+    out: list[str] = []
+    before, after = step.before, step.after
+    theta0 = float(t.object_path[0][2])
+    for i, ch in enumerate(t.combination):
+        if ch == "D" or i in sliding:
+            continue
+        c = before.contacts[i]
+        ref = hand.resolve_body(c.body)
+        if ref is None or ref.finger is None:
+            continue
+        rho = hand.body_radius(ref)
+        t0, L0, u0, phi0, _ = _axis_foot(hand, ref, before.q, before.position)
+        if not 1e-6 < t0 < 1 - 1e-6:
+            continue  # at a link's end: a pivot on the tip, glued (exact there)
+        e0 = np.array([np.cos(phi0), np.sin(phi0)])
+        side = 1.0 if float(e0[0] * u0[1] - e0[1] * u0[0]) > 0 else -1.0
+        sigma0 = _surface_arc(side, rho, t0, L0, u0, phi0)
+        worst_gap, worst_slip, k_slip = 0.0, 0.0, 0
+        for k, (q, vec) in enumerate(zip(t.q_path, t.object_path, strict=True)):
+            centre = np.asarray(vec[:2], dtype=float)
+            tt, L, u, phi, dist = _axis_foot(hand, ref, q, centre)
+            worst_gap = max(worst_gap, abs(dist - rho - r))
+            dphi = (phi - phi0 + np.pi) % (2 * np.pi) - np.pi
+            rel = (float(vec[2]) - theta0) - dphi  # the disk's turn relative to the link
+            slip = abs((_surface_arc(side, rho, tt, L, u, phi) - sigma0) - r * rel)
+            if slip > worst_slip:
+                worst_slip, k_slip = slip, k
+        if worst_gap > ROLL_TOL:
+            out.append(f"{tag}: rolling contact {i} ({c.body}) leaves the link's surface (gap {worst_gap:.3g})")
+        if worst_slip > ROLL_TOL:
+            out.append(f"{tag}: rolling contact {i} ({c.body}) slips: at waypoint {k_slip} the arc on the link "
+                       f"differs from r times the relative turn by {worst_slip:.3g}")
+        j = next((j for j, b in enumerate(after.bodies()) if b == c.body), None)
+        if j is None:
+            out.append(f"{tag}: rolling contact {i} ({c.body}) is missing after the step")
+            continue
+        _, _, u1, _, _ = _axis_foot(hand, ref, after.q, after.position)
+        y = after.position - r * u1  # (2,) where the disk touches the link at the end
+        on_link = hand.point_position(ref, after.contacts[j].point_body, after.q)
+        err = max(float(np.linalg.norm(on_link - y)), float(np.linalg.norm(after.world_point(j) - y)))
+        if err > ROLL_TOL:
+            out.append(f"{tag}: the state after the step does not have contact {i} ({c.body}) where it rolled "
+                       f"(off by {err:.3g})")
+    return out
 
 
 def verify_plan(scene: Scene, plan: Plan) -> list[str]:

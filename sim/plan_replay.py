@@ -323,6 +323,13 @@ class PlanSimulation:
     duration: float  # simulated seconds
     tolerance: float
     object_path: ObjectPath  # the simulated object pose along the run, sampled
+    #: the hand configuration ``(M,)`` and MuJoCo's contact points of the object (MuJoCo body name
+    #: of the touching link or fixed body -> world point ``(d,)``) once the start ramp has settled
+    #: and at the end: where a rolling contact really went (not in the JSON)
+    start_q: Array | None = None
+    final_q: Array | None = None
+    start_contacts: dict[str, Array] | None = None
+    final_contacts: dict[str, Array] | None = None
 
     @property
     def planned(self) -> Array:
@@ -444,6 +451,18 @@ class _Run:
 
     def q(self) -> Array:
         return np.array(self.data.qpos[self.qadr])  # (M,)
+
+    def object_contacts(self) -> dict[str, Array]:
+        """MuJoCo's contacts of the object now: the touching body's name -> world point ``(d,)``."""
+        m, d = self.model, self.data
+        out: dict[str, Array] = {}
+        for j in range(d.ncon):
+            c = d.contact[j]
+            g1, g2 = int(c.geom1), int(c.geom2)
+            if self.obj_geom in (g1, g2):
+                other = g2 if g1 == self.obj_geom else g1
+                out[m.body(int(m.geom_bodyid[other])).name] = np.array(c.pos[: self.dim])
+        return out
 
     def _loaded(self) -> bool:
         d = self.data
@@ -619,6 +638,7 @@ def simulate_plan(
     except _Drop as e:
         dropped, reason = True, f"at the start: {e}"
     run.sample()  # the pose the first step starts from
+    start_q, start_contacts = run.q(), run.object_contacts()
 
     for i, step in enumerate(steps):
         if dropped:
@@ -677,6 +697,7 @@ def simulate_plan(
         steps=tuple(out), start_pose=plan.start_pose, planned_final_pose=plan.final_pose,
         simulated_final_pose=run.pose().vector(), object_size=s, force_scale=run.F, dropped=dropped,
         drop_reason=reason, duration=run.t, tolerance=options.tolerance, object_path=run.object_path(),
+        start_q=start_q, final_q=run.q(), start_contacts=start_contacts, final_contacts=run.object_contacts(),
     )
 
 

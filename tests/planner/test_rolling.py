@@ -15,8 +15,12 @@ from analysis.exceptions import SceneError
 from analysis.kinematics import HandKinematics
 from analysis.loader import load_scene
 from analysis.scene import Disk, Scene
+from planner import Goal, plan
 from planner.manifold import ContactManifold
-from planner.state import GraspState, state_from_scene
+from planner.motion_edges import _direction_candidates, _torque_set
+from planner.nodes import GraphNodes
+from planner.object_motion import integrate_object_motion, rolled_contacts
+from planner.state import GraspState, StateAnalysis, all_f, state_from_scene
 
 SCENE = EXAMPLES / "planar_disk_rolling_link.json"
 R = 0.3  # the disk's radius in SCENE
@@ -157,3 +161,37 @@ def test_planar_plan_object_motion_rolls_on_link_tips(planar_scene: Scene, motio
         assert isinstance(shape, Disk)
         gap = man.body_distance(ref, pose1.position, q1)[0] - shape.radius
         assert abs(gap) < 1e-8
+
+
+def test_one_link_disk_rolls_but_is_not_held_once_the_link_tilts() -> None:
+    """Why the rolling plan is planned in the V of two links (test_rolling_plan.py), not here: the
+    only object motion of this scene with a torque set (32) lowers the link and the disk together,
+    and the planner's state after it has the contact where it rolled (under the disk's centre on
+    the tilted link's side, normal through the centre), but a single contact whose force must
+    pass through the centre cannot balance the vertical load on a tilted link: no stationary grasp
+    (18), so no plan."""
+    scene, hand, st = _setup()
+    p = plan(scene, Goal(type="displacement", displacement=[0.0, -0.05, 0.0], position_tolerance=0.005,
+                         rotation_tolerance="free"))
+    assert not p.found
+    assert p.rejections.get("no stationary grasp (18) of the new contacts", 0) >= 1
+    nodes = GraphNodes(scene, hand, p.goal)
+    sa = StateAnalysis.of(scene, st, hand)
+    parts, grasp = sa.parts("F"), sa.stationary("F")
+    oracle = parts.oracle()
+    dr = _direction_candidates(nodes, st, parts, (), sa.summary("F").example_direction)[-1]
+    ts = _torque_set(nodes, parts, grasp, oracle, dr)
+    assert ts is not None
+    motion = integrate_object_motion(nodes.model, st, ts.direction, ts.dq, [0], [], 0.009, check_path=False,
+                                     motion_space=parts.ms.Lambda_r_t)
+    assert motion is not None
+    q1, s1 = motion.q_path[-1], motion.pose_path[-1] - st.pose_vector()
+    assert abs(q1[0] - st.q[0]) > 5e-3  # the link tilted
+    after = st.with_contacts(rolled_contacts(hand, scene, st, [0], q1, s1), q1).with_pose(st.pose.displaced(s1))
+    ref = hand.resolve_body("arm/0")
+    assert ref is not None
+    pb = after.contacts[0].point_body
+    np.testing.assert_allclose(pb[1], RHO, atol=1e-9)  # on the link's side ...
+    c_link = hand.to_local(ref, after.position, q1)
+    np.testing.assert_allclose(c_link[:2], [pb[0], RHO + R], atol=1e-9)  # ... under the centre
+    assert StateAnalysis.of(scene, after, hand).stationary(all_f(after)) is None
