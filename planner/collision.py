@@ -427,11 +427,102 @@ class CollisionModel:
         configuration ``q`` ``(M,)``; negative means collision. Links in ``touching`` may touch
         the object with their true radius (their clearance to the object is not counted).
         ``allowance`` (``<= 0``, laid out as :meth:`clearance_terms`) lowers the bound of each
-        term: an overlap that exists at the start of a motion may persist but not grow."""
+        term: an overlap that exists at the start of a motion may persist but not grow.
+
+        Capsule fingers: the same minimum as ``min(clearance_terms - allowance)``, without
+        evaluating blocks that cannot hold it (:meth:`_capsule_clearance_min`)."""
+        fd = self._finger_data(finger)
+        if not (fd.urdf or fd.coal_object):
+            return self._capsule_clearance_min(fd, finger, q, position, rotation, touching, allowance)
         terms = self.clearance_terms(finger, q, position, rotation, touching)
         if allowance is not None:
             terms = terms - allowance
         return float(terms.min()) if terms.size else float(np.inf)
+
+    def _capsule_clearance_min(
+        self,
+        fd: _FingerData,
+        finger: int,
+        q: Array,
+        position: Array,
+        rotation: Array,
+        touching: Sequence[BodyRef],
+        allowance: Array | None,
+    ) -> float:
+        """``min(clearance_terms - allowance)`` of a capsule finger, bit for bit: the object terms
+        first, then a block (own/other link pairs, fixed bodies) only where a lower bound of one of
+        its terms is below the minimum so far. The bounds use that a distance function is
+        1-Lipschitz: a segment of length ``L`` and midpoint ``c`` is at least ``dist(c) - L/2``
+        from a convex body, two segments at least ``|c_a - c_b| - (L_a + L_b)/2`` apart (the
+        sampled box distances are never below the exact ones)."""
+        n = len(fd.refs)
+        d = self.scene.dim
+        A, B = self.segment_arrays(finger, q)  # (n, d), (n, d)
+        R = np.asarray(rotation, dtype=float)[:d, :d]
+        pos = np.asarray(position, dtype=float)[:d]
+        od = _shape_segments_distance(self.scene.object.shape, (A - pos) @ R, (B - pos) @ R, d, self.sample_step)
+        touch = np.zeros(n, dtype=bool)
+        for t in touching:
+            if t.finger == finger and t.link is not None:
+                touch[min(int(t.link), n - 1)] = True
+        obj = np.where(touch, np.maximum(0.0, od - fd.r_true + 1e-9), od - fd.r_infl)  # (n,)
+        al = allowance
+        if al is not None:
+            obj = obj - al[:n]
+        best = float(obj.min()) if n else float(np.inf)
+        margin = 1e-9  # the bounds' rounding, far above it
+        i, j = fd.pairs[:, 0], fd.pairs[:, 1]
+        if len(i):
+            others = [k for k in range(len(self.hand.fingers))
+                      if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
+            if others:
+                segs = [self._segments_cached(k, q) for k in others]
+                S0 = np.vstack([A, *(sg[0] for sg in segs)])
+                S1 = np.vstack([B, *(sg[1] for sg in segs)])
+            else:
+                S0, S1 = A, B
+            P0, P1, Q0, Q1 = S0[i], S1[i], S0[j], S1[j]  # (p, d) each
+            mid = 0.5 * (P0 + P1) - 0.5 * (Q0 + Q1)
+            half = 0.5 * (np.sqrt(((P1 - P0) ** 2).sum(axis=1)) + np.sqrt(((Q1 - Q0) ** 2).sum(axis=1)))
+            bound = np.sqrt((mid * mid).sum(axis=1)) - half - fd.pair_radii  # (p,) <= the terms
+            if al is not None:
+                bound = bound - al[2 * n:]
+            need = bound - margin < best
+            if need.any():
+                pd = segment_segment_distances(P0[need], P1[need], Q0[need], Q1[need]) - fd.pair_radii[need]
+                if al is not None:
+                    pd = pd - al[2 * n:][need]
+                best = min(best, float(pd.min()))
+        if fd.any_fixed:
+            D = B - A
+            L = np.sqrt((D * D).sum(axis=1))
+            Ab = A - fd.base
+            at_base = (Ab * Ab).sum(axis=1) < 1e-18
+            trim = np.maximum(3.0 * fd.r_infl, BASE_TRIM * L)
+            skip = at_base & (2.0 * trim >= L)
+            A2 = np.where(at_base[:, None], A + D * (trim / np.where(L > 0, L, 1.0))[:, None], A)
+            checked = fd.fixed_checked & ~skip
+            al_f = al[n:2 * n] if al is not None else np.zeros(n)
+            bounded = all(isinstance(fb.shape, Disk | Sphere | Box | Segment) for fb in self.scene.fixed_bodies)
+            if checked.any():
+                if bounded:
+                    C = 0.5 * (A2 + B)
+                    E = B - A2
+                    half_f = 0.5 * np.sqrt((E * E).sum(axis=1))
+                    lb = np.full(n, np.inf)
+                    for fb in self.scene.fixed_bodies:
+                        lb = np.minimum(lb, shape_signed_distances(fb.shape, C, d) - half_f)
+                    lb = lb - fd.r_infl - al_f
+                    do = bool(np.any(lb[checked] - margin < best))
+                else:
+                    do = True
+                if do:  # the block exactly as clearance_terms evaluates it
+                    dist = np.full(n, np.inf)
+                    for fb in self.scene.fixed_bodies:
+                        dist = np.minimum(dist, _shape_segments_distance(fb.shape, A2, B, d, self.sample_step))
+                    fixed = np.where(checked, dist - fd.r_infl, np.inf) - al_f
+                    best = min(best, float(fixed.min()))
+        return best
 
     def start_allowance(self, finger: int, q: Array, position: Array, rotation: Array) -> Array:
         """The overlaps ``min(0, term)`` of :meth:`clearance_terms` at the start ``q`` of a motion

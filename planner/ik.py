@@ -36,6 +36,8 @@ def _chain_tip_symbolic(chain: SerialChain, q: Any) -> tuple[Any, Any]:
 
 
 _IK_SOLVERS: dict[int, tuple[SerialChain, Any]] = {}
+#: IPOPT iterations of one IK solve (:func:`_ik_solver`)
+IK_MAX_ITER = 60
 
 
 def _ik_solver(chain: SerialChain, dim: int) -> Any:
@@ -52,8 +54,10 @@ def _ik_solver(chain: SerialChain, dim: int) -> Any:
     normal = ca.SX.sym("normal", dim)
     g = ca.vertcat(tip[:dim] - target, ca.dot(axis[:dim], normal))
     nlp = {"x": q, "p": ca.vertcat(q0, target, normal), "f": ca.sumsqr(q - q0), "g": g}
-    opts: dict[str, Any] = {"ipopt.print_level": 0, "print_time": False, "ipopt.max_iter": 200, "ipopt.tol": 1e-10,
-            "ipopt.sb": "yes"}
+    # every solve that succeeds takes <= 20 iterations on the bundled scenes (297 solves of the palm
+    # scene's plan); 60 ends the unreachable targets' solves 3x sooner than 200 did (issue 11)
+    opts: dict[str, Any] = {"ipopt.print_level": 0, "print_time": False, "ipopt.max_iter": IK_MAX_ITER,
+                            "ipopt.tol": 1e-10, "ipopt.sb": "yes"}
     solver = ca.nlpsol("ik", "ipopt", nlp, opts)
     _IK_SOLVERS[id(chain)] = (chain, solver)
     return solver
