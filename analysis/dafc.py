@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import heapq
 import math
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -54,6 +55,12 @@ RELAXED_MARGIN = 1e-3
 #: and by how much (relative to the motion's size) ``y^T b`` must be negative to decide without an LP.
 FARKAS_POINTS = 16
 FARKAS_MARGIN = 1e-6
+#: Optimal vertices of the force LP kept per set of rows (:meth:`DAFCOracle._vertex_sup`), the
+#: slack (relative to the bound) below which a row counts as active there, and the tolerance
+#: (relative to the objective) of the multipliers' sign and residual that certify a vertex optimal.
+VERTEX_POINTS = 48
+VERTEX_ACTIVE_TOL = 1e-9
+VERTEX_DUAL_TOL = 1e-12
 
 SEMANTICS: dict[str, str] = {
     "dafc_unknowns": "total contact forces f_c; membership does not depend on the stationary solution",
@@ -87,6 +94,14 @@ class DirectionTest:
 
     def __post_init__(self) -> None:
         assert abs(float(np.linalg.norm(self.direction)) - 1.0) < 1e-6 or not self.member
+
+
+@dataclass
+class _VertexCache:
+    """Optimal vertices of the force LP for one set of rows (mutable: grows per oracle)."""
+
+    X: Array  # (k, L_c) vertices, units of F0
+    certs: list[tuple[Array, Array, int]]  # per vertex: pinv(A_act^T) (k_act, L_c), A_act^T (L_c, k_act), #ub rows
 
 
 class DAFCOracle:
@@ -127,6 +142,10 @@ class DAFCOracle:
         # Farkas certificates y (k, #D) of directions the redundancy cannot make allowable
         self._farkas = np.zeros((0, self.B.shape[0]))
         self._farkas_lp: LPModel | None = None
+        # optimal vertices of the force LP per constraint data (key: the S columns of G_eff), each
+        # with what certifies it optimal for another objective (:meth:`_vertex_sup`); None: infeasible
+        self._vertices: dict[bytes, _VertexCache | None] = {}
+        self.vertex_hits = 0  # force LPs decided by a certified earlier vertex (no HiGHS call)
 
     # -- kinematics -----------------------------------------------------------------------------
 
@@ -293,17 +312,23 @@ class DAFCOracle:
         if not self.sel.s_index:
             model = self._force_lp()
             G_eff = st.G_c
+            key = b""
         else:
             G_eff = st.G_c + kinetic_friction(self.system, self.sel, self.slips_of(zeta_c)).G_w
             model = self._force_lp()
+            key = G_eff[:, self._s_cols].tobytes()  # the LP's rows and objective map depend on these only
+        c = G_eff.T @ dr  # (L_c,) work per unit force (units of F0)
+        if not witness:
+            known = self._vertex_sup(key, c, dr)
+            if known is not None:
+                return known
+        if self.sel.s_index:
             s_cols = self._s_cols
             E = snap(self._XiT @ G_eff[:, s_cols])  # (p, #S), noise-level entries zero as in the base rows
             rows, cols = np.indices(E.shape)
             model.change_coefficients(rows.ravel() + model.n_ub, s_cols[cols.ravel()], E.ravel())
-        if G_eff.shape[1] == 0:
-            return float(dr @ w_ex), np.zeros(0)
         try:
-            res = model.solve(G_eff.T @ dr, maximize=True)
+            res = model.solve(c, maximize=True)
         except SolverError:
             # every HiGHS method (warm, cold, defaults, interior point) ended undecided: this motion
             # is not a member, and the combination's verdict says the data are degenerate
@@ -312,12 +337,77 @@ class DAFCOracle:
             return np.nan, None
         self.lp_count += 1
         if res.status == "infeasible":
+            self._vertices[key] = None  # the rows do not depend on dr: infeasible for every direction
             return -np.inf, None
         if res.status != "optimal":  # the grip bound bounds every force
             raise SolverError("HiGHS", f"DAFC force LP ended '{res.status}' although its forces are bounded")
         assert res.objective is not None and res.x is not None
+        self._keep_vertex(key, model, res.x)
         f = res.x * self.system.scales.force
         return float(G_eff.T @ dr @ f + dr @ w_ex), f
+
+    def _keep_vertex(self, key: bytes, model: LPModel, x: Array) -> None:
+        """Store the force LP's optimal point ``x`` (units of F0) for the rows ``key`` with the
+        pseudo-inverse of its active rows ``A_act`` (the inequality rows within
+        :data:`VERTEX_ACTIVE_TOL` of their bound and every equality row): for another objective
+        ``c`` the multipliers ``y = pinv(A_act^T) c`` certify ``x`` optimal (:meth:`_vertex_sup`)."""
+        cache = self._vertices.get(key)
+        if key in self._vertices and cache is None:
+            return  # cannot happen for one set of rows (infeasible there); kept as decided
+        if cache is not None and cache.X.shape[0] >= VERTEX_POINTS:
+            return
+        if cache is not None and bool(np.any(np.all(np.abs(cache.X - x) <= 1e-12, axis=1))):
+            return
+        if np.isfinite(model.lb).any() or np.isfinite(model.ub).any():
+            return  # the certificate below knows the rows only (the force LP has free variables)
+        slack = model.b_ub - model.A_ub @ x  # (m_ub,)
+        active = slack <= VERTEX_ACTIVE_TOL * np.maximum(1.0, np.abs(model.b_ub))
+        A_act = np.vstack([model.A_ub[active], model.A_eq])  # (k, L_c)
+        if A_act.shape[0] < model.n:
+            return  # not a vertex: no unique multipliers to certify it with
+        U, s, Vt = np.linalg.svd(A_act.T, full_matrices=False)  # (L_c, L_c), (L_c,), (L_c, k): one SVD
+        if float(s[-1]) <= 1e-10 * max(1.0, float(s[0])):
+            return  # rank below L_c: not a vertex
+        entry = ((Vt.T / s) @ U.T, np.ascontiguousarray(A_act.T), int(active.sum()))  # pinv(A_act^T) (k, L_c)
+        if cache is None:
+            self._vertices[key] = _VertexCache(x[None, :].copy(), [entry])
+        else:
+            cache.X = np.vstack([cache.X, x[None, :]])
+            cache.certs.append(entry)
+
+    def _vertex_sup(self, key: bytes, c: Array, dr: Array) -> tuple[float, Array | None] | None:
+        """The force LP's answer for the objective ``c = G_eff^T dr`` from an earlier optimal
+        vertex of the same rows, or None (then the LP decides).
+
+        Among the stored vertices only the one of largest ``c^T x`` can be optimal. It is when
+        multipliers ``y = pinv(A_act^T) c`` of its active rows satisfy ``A_act^T y = c`` and
+        ``y >= 0`` on the inequality rows (LP duality: then ``c^T x' <= y^T b_act = c^T x`` for every
+        feasible ``x'``), both checked to :data:`VERTEX_DUAL_TOL` relative to ``|c|``. The answer is
+        used only when the work clears the threshold ``work_tol(dr)`` by
+        :data:`RELAXED_MARGIN` x the force scale per unit motion either way (far above the
+        tolerances' effect), so the verdict is the LP's; the value is the supremum itself."""
+        if key not in self._vertices:
+            return None
+        cache = self._vertices[key]
+        sy = self.system
+        if cache is None:
+            self.vertex_hits += 1
+            return -np.inf, None
+        vals = cache.X @ c  # (k,)
+        j = int(np.argmax(vals))
+        M, AT, n_ub = cache.certs[j]
+        y = M @ c  # (k_act,)
+        scale = VERTEX_DUAL_TOL * max(1.0, float(np.max(np.abs(c), initial=0.0)))
+        if float(np.min(y[:n_ub], initial=0.0)) < -scale or float(np.max(np.abs(AT @ y - c))) > scale:
+            return None
+        x = cache.X[j]
+        f = x * sy.scales.force
+        sup = float(c @ f + dr @ sy.w_ex)
+        sc = sy.scales
+        if abs(sup - sc.work_tol(dr)) <= RELAXED_MARGIN * sc.force * sc.motion_size(dr):
+            return None  # too close to the threshold: the LP decides
+        self.vertex_hits += 1
+        return sup, f
 
     def certify(self, t: DirectionTest) -> bool:
         """Re-check a member in newtons: its forces lie in the friction set, satisfy the passive
@@ -394,21 +484,20 @@ class DAFCOracle:
         if screen and self.sel.s_index and zeta_r is None and not self.relaxed_positive(dr):
             return DirectionTest(dr, u, None, False, np.nan,
                                  "the fingers cannot do positive work, whatever the S-points' slip", True)
-        candidates: list[Array] = []
+        candidates: list[Array] | Iterator[Array]
         if zeta_r is not None:
-            candidates.append(np.asarray(zeta_r, dtype=float))
+            candidates = [np.asarray(zeta_r, dtype=float)]
         else:
             z0 = self.redundancy_for(u)
             if z0 is None:
                 return DirectionTest(dr, u, None, False, np.nan, "not allowable: a D-point would penetrate",
                                      True)
             if self.slip_depends_on_redundancy:
-                alts = self._alternative_redundancies(u, z0, count=0 if quick else 4)
-                candidates.extend(alts[:1])
-                candidates.append(z0)
-                candidates.extend(alts[1:])
+                # the first allowable alternative, the least-L1 one, the other alternatives: computed
+                # lazily, so a member among the first ones costs no further redundancy LPs
+                candidates = _first_then(self._iter_alternatives(u, z0, count=0 if quick else 4), z0)
             else:
-                candidates.append(z0)
+                candidates = [z0]
         last: DirectionTest | None = None
         work_tol = sc.work_tol(dr)
         for zr in candidates:
@@ -472,7 +561,12 @@ class DAFCOracle:
         return None if res.x is None else res.x[:nr]
 
     def _alternative_redundancies(self, u: Array, z0: Array, count: int = 4) -> list[Array]:
-        """Alternatives to the least-L1 redundancy that stay allowable.
+        """Every alternative of :meth:`_iter_alternatives`, as a list."""
+        return list(self._iter_alternatives(u, z0, count))
+
+    def _iter_alternatives(self, u: Array, z0: Array, count: int = 4) -> Iterator[Array]:
+        """Alternatives to the least-L1 redundancy that stay allowable, computed as they are asked
+        for (a member found with the first needs none of the others; the order is the same).
 
         First the allowable redundancy closest to friction-aligned slips (slip of the object
         relative to the finger opposite to the object point's tangential velocity, so kinetic
@@ -491,24 +585,34 @@ class DAFCOracle:
             vt = v - (v @ n) * n
             target[k * d : (k + 1) * d] = -vt
         scale = max(1.0, float(np.linalg.norm(ms.Lambda_q_t @ u)))
-        cands: list[Array] = []
-        aligned = self._aligned_allowable(u, base, Pr, target, scale)
-        if aligned is not None:
-            cands.append(aligned)
-        for sign in (1.0, -1.0):
-            tn = float(np.linalg.norm(target))
-            if tn < 1e-12:
-                break
-            z, *_ = np.linalg.lstsq(Pr, sign * scale * target / tn - base, rcond=None)
-            cands.append(z)
-        rng = np.random.default_rng(0)
-        cands.extend(z0 + scale * rng.standard_normal(nr) for _ in range(count))
-        out = []
-        for z in cands:
+
+        def cands() -> Iterator[Array]:
+            aligned = self._aligned_allowable(u, base, Pr, target, scale)
+            if aligned is not None:
+                yield aligned
+            for sign in (1.0, -1.0):
+                tn = float(np.linalg.norm(target))
+                if tn < 1e-12:
+                    break
+                z, *_ = np.linalg.lstsq(Pr, sign * scale * target / tn - base, rcond=None)
+                yield z
+            rng = np.random.default_rng(0)
+            for _ in range(count):
+                yield z0 + scale * rng.standard_normal(nr)
+
+        for z in cands():
             zc = ms.zeta_c(u, z)
             if not self.B.shape[0] or np.all(self.B @ zc <= ALLOW_TOL * max(1.0, float(np.linalg.norm(zc)))):
-                out.append(z)
-        return out
+                yield z
+
+
+def _first_then(rest: Iterator[Array], second: Array) -> Iterator[Array]:
+    """The first item of ``rest``, then ``second``, then the remaining items of ``rest``."""
+    first = next(rest, None)
+    if first is not None:
+        yield first
+    yield second
+    yield from rest
 
 
 def _norm(v: Array) -> float:
@@ -581,9 +685,10 @@ def _sector_rows(sec: Sector, d: int, margin: float) -> tuple[Array, Array]:
     return np.array(rows), np.array(rhs)
 
 
-def _relaxed_box_lp(oracle: DAFCOracle, dr: Array, fixed_G: Array, dep: list[int], box: tuple[Sector, ...]
-                    ) -> tuple[float, list[Array]]:
-    """Upper bound of the work of (22) over every motion whose slips lie in the sector ``box``.
+def _relaxed_box_model(oracle: DAFCOracle, fixed_G: Array, dep: list[int], box: tuple[Sector, ...]
+                       ) -> tuple[LPModel, Array, list[tuple[int, ...]]]:
+    """The LP of :func:`_relaxed_box_lp` for the sector ``box``: (model, ``G`` ``(D, n)``, the
+    friction unknowns of each dependent point). Its rows do not depend on the object direction.
 
     Unknowns ``[f_c; friction of the dependent S-points]`` in units of the force scale. The
     friction ``t = -mu n s/|s|`` of a dependent S-point with slip angle in ``[a, b]`` (half-width
@@ -592,8 +697,7 @@ def _relaxed_box_lp(oracle: DAFCOracle, dr: Array, fixed_G: Array, dep: list[int
     tangent at the bisector, exact as ``h -> 0``); a sign in 2-D is exact; a free point has any
     tangential friction inside a circumscribed polygon of ``mu n``. ``fixed_G`` ``(D, L_c)`` is
     ``G_c`` plus the kinetic friction of the S-points whose slip does not depend on the
-    redundancy. Returns the bound and the friction directions of a maximiser (tangent
-    coordinates, per dependent point; empty when the box admits no forces)."""
+    redundancy."""
     sy, sel, st, fs = oracle.system, oracle.sel, oracle.st, oracle.fs
     d, L_c = sy.d, st.G_c.shape[1]
     cols: list[Array] = []  # (D,) per friction unknown
@@ -642,7 +746,29 @@ def _relaxed_box_lp(oracle: DAFCOracle, dr: Array, fixed_G: Array, dep: list[int
                                          for sec, sl in zip(box, slots, strict=True) for _ in sl]]
     model = LPModel(n, A_ub=A_ub, b_ub=b_ub, A_eq=snap(oracle.Xi.T @ G),
                     b_eq=snap(-(oracle.Xi.T @ sy.w_ex) / sy.scales.force), lb=lb, feasibility=LP_FEAS_TOL)
-    res = model.solve(G.T @ dr, maximize=True)
+    return model, G, slots
+
+
+def _relaxed_box_lp(oracle: DAFCOracle, dr: Array, fixed_G: Array, dep: list[int], box: tuple[Sector, ...],
+                    store: dict[str, object] | None = None) -> tuple[float, list[Array]]:
+    """Upper bound of the work of (22) over every motion whose slips lie in the sector ``box``
+    (the LP of :func:`_relaxed_box_model`, maximising ``dr^T G x``).
+
+    ``store``: a dict the caller keeps for one box (same ``fixed_G``, ``dep``, ``box``); its model
+    is built on the first call and re-solved from scratch (no warm start, so the maximiser does
+    not depend on the order of the directions) on later ones. Returns the bound and the friction
+    directions of a maximiser (tangent coordinates, per dependent point; empty when the box admits
+    no forces)."""
+    sy, d = oracle.system, oracle.system.d
+    if store is not None and "model" in store:
+        model, G, slots = store["model"], store["G"], store["slots"]
+        assert isinstance(model, LPModel) and isinstance(G, np.ndarray) and isinstance(slots, list)
+        res = model.solve_cold(G.T @ dr, maximize=True)
+    else:
+        model, G, slots = _relaxed_box_model(oracle, fixed_G, dep, box)
+        if store is not None:
+            store.update(model=model, G=G, slots=slots)
+        res = model.solve(G.T @ dr, maximize=True)
     oracle.lp_count += 1
     if res.status == "infeasible":
         return -np.inf, []
@@ -677,8 +803,17 @@ def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector,
     A: list[Array] = []
     b: list[float] = []
     B_u, B_r = oracle.B[:, :a_bar], oracle.B[:, a_bar:]
+
+    def row(z_part: Array, dev: int | None = None, sign: float = 0.0) -> Array:
+        """``[z_part, sign e_dev]`` ``(n,)``: a row over ``[z; deviations]``."""
+        out = np.zeros(n)
+        out[:nr] = z_part
+        if dev is not None:
+            out[nr + dev] = sign
+        return out
+
     for r in range(B_r.shape[0]):
-        A.append(np.r_[B_r[r], np.zeros(k_dev)])
+        A.append(row(B_r[r]))
         b.append(float(-(B_u[r] @ u)) + 0.5 * ALLOW_TOL)
     for q, (k, sec, g) in enumerate(zip(dep, box, targets, strict=True)):
         T = sy.tangents[sel.s_index[k]]
@@ -687,21 +822,22 @@ def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector,
         S_0 = T @ (oracle.Ps[rows, :a_bar] @ u)  # (d-1,)
         R, rhs = _sector_rows(sec, d, margin)
         for rr, v in zip(R, rhs, strict=True):
-            A.append(np.r_[-(rr @ S_z), np.zeros(k_dev)])
+            A.append(row(-(rr @ S_z)))
             b.append(float(rr @ S_0 - v))
         gn = float(np.linalg.norm(g))
         goal = scale * g / gn if gn > 1e-12 else np.zeros(d - 1)
         for j in range(d - 1):
-            e = np.zeros(k_dev)
-            e[q * (d - 1) + j] = 1.0
-            A.append(np.r_[S_z[j], -e])
+            A.append(row(S_z[j], q * (d - 1) + j, -1.0))
             b.append(float(goal[j] - S_0[j]))
-            A.append(np.r_[-S_z[j], -e])
+            A.append(row(-S_z[j], q * (d - 1) + j, -1.0))
             b.append(float(S_0[j] - goal[j]))
-    model = LPModel(n, A_ub=np.array(A).reshape(-1, n), b_ub=np.array(b),
-                    lb=np.r_[np.full(nr, -zmax), np.zeros(k_dev)], ub=np.r_[np.full(nr, zmax), np.full(k_dev, np.inf)])
+    lb, ub = np.zeros(n), np.full(n, np.inf)  # (n,): |z| <= zmax, deviations >= 0
+    lb[:nr], ub[:nr] = -zmax, zmax
+    cost = np.zeros(n)
+    cost[nr:] = 1.0
+    model = LPModel(n, A_ub=np.array(A).reshape(-1, n), b_ub=np.array(b), lb=lb, ub=ub)
     try:
-        res = model.solve_cold(np.r_[np.zeros(nr), np.ones(k_dev)])
+        res = model.solve_cold(cost)
     except SolverError:
         oracle.undecided += 1
         return None
@@ -783,10 +919,11 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
         Z, U = Z[moving], U[moving]
         bounds = np.full(len(U), -np.inf)
         targets: list[list[Array]] = []
+        store: dict[str, object] = {}  # the box's relaxed LP, built once for all its directions
         try:
             for j, u in enumerate(U):
                 dr = ms.Lambda_r_t @ (u / np.linalg.norm(u))
-                ub, tg = _relaxed_box_lp(oracle, dr, G0, list(range(nS)), box)
+                ub, tg = _relaxed_box_lp(oracle, dr, G0, list(range(nS)), box, store)
                 bounds[j] = ub - sy.scales.work_tol(dr)
                 targets.append(tg)
         except SolverError:
@@ -811,7 +948,7 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
             if a_bar > 1 and float(np.linalg.norm(u_c)) > 1e-9:
                 u_c = u_c / np.linalg.norm(u_c)
                 try:
-                    _, tg = _relaxed_box_lp(oracle, ms.Lambda_r_t @ u_c, G0, list(range(nS)), box)
+                    _, tg = _relaxed_box_lp(oracle, ms.Lambda_r_t @ u_c, G0, list(range(nS)), box, store)
                 except SolverError:
                     tg = []  # undecided: this one candidate is not tried
                 z = _box_motion(oracle, u_c, list(range(nS)), box, tg) if tg else None

@@ -203,3 +203,29 @@ def test_work_threshold_is_the_weighted_euclidean_norm(planar) -> None:
     for dr in np.random.default_rng(2).standard_normal((20, planar.D)):
         expected = 1e-6 * sc.force * float(np.linalg.norm(dr * sc.motion_weights()))
         assert sc.work_tol(dr) == pytest.approx(expected, rel=1e-15, abs=0)
+
+
+def test_certified_vertices_decide_as_the_force_lp(planar) -> None:
+    # the sampled set (witness=False) may decide a direction from an earlier optimal vertex of the
+    # same force-LP rows; every such answer must equal a fresh oracle's LP (verdict and supremum)
+    hits = 0
+    for comb in ("FFDFD", "SDDSD", "FSDSD", "SSDFD", "FFSDS", "DSSDD"):
+        parts = CombinationParts.build(planar, comb)
+        if parts.ms.a_bar == 0:
+            continue
+        oracle = parts.oracle()
+        for dr in _seeded_directions(parts.ms, 60, seed=13):
+            before = oracle.vertex_hits
+            t = oracle.test(dr, witness=False)
+            if oracle.vertex_hits == before:
+                continue
+            hits += 1
+            ref = parts.oracle().test(dr, witness=False)  # no stored vertices: decided by the LP
+            assert t.member == ref.member and t.reason == ref.reason, (comb, dr)
+            if np.isfinite(ref.work):
+                assert t.work == pytest.approx(ref.work, rel=1e-9, abs=1e-9 * planar.scales.force)
+            else:
+                assert not np.isfinite(t.work)
+            if t.member:
+                assert oracle.certify(t)  # the stored vertex's forces pass the newton-level check
+    assert hits > 20  # the shortcut was taken, so the comparison tested it
