@@ -209,19 +209,63 @@ class ContactManifold:
         psi = float(np.arctan2(n[0] * u[1] - n[1] * u[0], n @ u))
         return -side * t * L + self.hand.body_radius(ref) * psi, float(np.arctan2(-u[1], -u[0]))
 
+    def _roll_at(self, k: int, a: Array, b: Array, c: Array, theta: float) -> tuple[float, float]:
+        """Rolling contact ``k``'s gap and rolling row (see :meth:`_rolling_rows`) for the link's
+        axis ``a -> b`` ``(2,)`` each, the disk centre ``c`` ``(2,)`` and the disk's turn ``theta``
+        from the start (:meth:`body_distance` and :meth:`_roll_coords` in one)."""
+        _, ref, side, sig0, gamma0 = self.rolls[k]
+        e = b - a  # (2,)
+        L = float(np.hypot(e[0], e[1]))
+        eh = e / L
+        t = min(max(float((c - a) @ eh) / L, 0.0), 1.0)
+        v = c - (a + t * L * eh)  # (2,) from the closest axis point to the centre
+        dist = float(np.hypot(v[0], v[1]))
+        u = v / max(dist, 1e-300)
+        r_link = self.hand.body_radius(ref)
+        n0, n1 = -side * eh[1], side * eh[0]  # the side's outward normal
+        psi = float(np.arctan2(n0 * u[1] - n1 * u[0], n0 * u[0] + n1 * u[1]))
+        sig, gamma = -side * t * L + r_link * psi, float(np.arctan2(-u[1], -u[0]))
+        dbeta = (gamma - gamma0 + np.pi) % (2 * np.pi) - np.pi - theta
+        return dist - r_link - self.radius, (sig - sig0) + self.radius * dbeta
+
     def _rolling_rows(self, x: Array) -> Array:
         """``(2 n_roll,)``: per rolling contact its gap and its rolling row; ``beta - beta_0`` is the
         touching point's turn seen from the centre (``gamma - gamma_0``, within half a turn) minus
         the disk's turn ``s_theta`` (not wrapped: a disk may roll more than half a turn)."""
         q, s = x[: self.M], x[self.M:]
-        pose = self.pose(s)
+        c = self.pose(s).position
         out = np.empty(2 * len(self.rolls))
-        for k, (_, ref, side, sig0, gamma0) in enumerate(self.rolls):
-            out[2 * k] = self.body_distance(ref, pose.position, q)[0] - self.radius
-            sig, gamma = self._roll_coords(ref, side, q, pose)
-            dbeta = (gamma - gamma0 + np.pi) % (2 * np.pi) - np.pi - s[2]
-            out[2 * k + 1] = (sig - sig0) + self.radius * dbeta
+        for k, roll in enumerate(self.rolls):
+            a, b = self.hand.body_segment(roll[1], q)
+            out[2 * k: 2 * k + 2] = self._roll_at(k, a[:2], b[:2], c, float(s[2]))
         return out
+
+    def _rolling_jacobian(self, x: Array) -> Array:
+        """``(2 n_roll, M + D)`` of :meth:`_rolling_rows`: central differences (h = 1e-7: errors
+        ~1e-8 on smooth pieces) in the axis ends ``a``, ``b``, the centre ``c`` and the turn, times
+        their Jacobians (``a``, ``b`` points of the link, eq. 1; ``c = p_0 + s_xy``, the turn ``s_theta``)."""
+        h = 1e-7
+        q, s = x[: self.M], x[self.M:]
+        c = self.pose(s).position
+        th = float(s[2])
+        J = np.zeros((2 * len(self.rolls), self.M + self.D))
+        for k, roll in enumerate(self.rolls):
+            ref = roll[1]
+            a3, b3 = self.hand.body_segment(ref, q)
+            a, b = a3[:2], b3[:2]
+            z = np.concatenate([a, b, c, [th]])  # (7,)
+
+            def f(v: Array) -> Array:
+                return np.array(self._roll_at(k, v[0:2], v[2:4], v[4:6], float(v[6])))  # noqa: B023
+
+            dz = np.column_stack([(f(z + h * e) - f(z - h * e)) / (2 * h) for e in np.eye(7)])  # (2, 7)
+            Ja = self.hand.point_jacobian(ref, a3, q)[:2]  # (2, M)
+            Jb = self.hand.point_jacobian(ref, b3, q)[:2]  # (2, M)
+            rows = slice(2 * k, 2 * k + 2)
+            J[rows, : self.M] = dz[:, 0:2] @ Ja + dz[:, 2:4] @ Jb
+            J[rows, self.M: self.M + 2] = dz[:, 4:6]
+            J[rows, self.M + 2] = dz[:, 6]
+        return J
 
     def rolling_contact(self, k: int, x: Array) -> tuple[int, Array, Array, Array]:
         """Rolling contact ``k`` at ``x``: its contact index, the touching point (world ``(2,)``), the
@@ -288,11 +332,8 @@ class ContactManifold:
                 J[r, self.M + 2] = -np.array([-y[1], y[0]])
             else:
                 J[r, self.M + 3:] = skew(y) @ _left_jacobian_so3(s[3:])
-        if self.rolls:  # central differences (h = 1e-7: errors ~1e-8 on smooth pieces)
-            h = 1e-7
-            J[self._roll0: self._slide0] = np.column_stack(
-                [(self._rolling_rows(x + h * e) - self._rolling_rows(x - h * e)) / (2 * h)
-                 for e in np.eye(self.M + self.D)])
+        if self.rolls:
+            J[self._roll0: self._slide0] = self._rolling_jacobian(x)
         for k, ref in enumerate(self.sliding):  # d gap = u^T (d p_o - J(y) dq); the centre is p_o
             row = self._slide0 + k
             c = self.sliding_points[k]
