@@ -11,6 +11,7 @@ import pytest
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from analysis.geometry import body_surface_distance, link_shapes
 from analysis.kinematics import (
     BodyRef,
     HandKinematics,
@@ -171,9 +172,14 @@ def test_canonical_contact_points_lie_on_their_links(path: Path) -> None:
         assert ref is not None
         if ref.is_fixed:
             continue
-        a, b = hand.body_segment(ref, hand.q0)
         p = np.asarray(c.point)
-        assert segment_distance(p, a, b) - hand.body_radius(ref) == pytest.approx(0.0, abs=1e-6)
+        # on the link's surface: its capsule, or its URDF collision shapes (link_geometry "urdf")
+        d = body_surface_distance(scene, hand, ref, p)
+        assert d is not None
+        assert d == pytest.approx(0.0, abs=1e-6)
+        if link_shapes(hand, ref, hand.q0) is None:  # a capsule: the same by its segment
+            a, b = hand.body_segment(ref, hand.q0)
+            assert segment_distance(p, a, b) - hand.body_radius(ref) == pytest.approx(0.0, abs=1e-6)
         # the point round-trips through the body frame
         np.testing.assert_allclose(
             hand.point_position(ref, hand.to_local(ref, p, hand.q0), hand.q0), p, rtol=0, atol=1e-12
