@@ -39,7 +39,6 @@ from planner.search import Successor
 from planner.state import GraspState
 from planner.transition import Transition
 
-
 #: goals reached by moving the object: their searches get no link releases
 #: (:mod:`planner.link_release`). Those are short and leave the pose where it is, so they are
 #: expanded before the motions and spent the search's expansions (Baxter's 3 cm lift found no
