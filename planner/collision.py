@@ -251,6 +251,20 @@ def _box_segments_distance(c: Array, h: Array, A: Array, B: Array, step: float, 
     return box_signed_distance(A[:, None, :] + tf[:, :, None] * D[:, None, :], c, h).min(axis=1)
 
 
+
+def _trimmed_at_base(A: Array, B: Array, base: Array, r_infl: Array) -> tuple[Array, Array]:
+    """The link segments ``A -> B`` ``(n, 3)`` checked against fixed bodies: a segment that starts
+    at its finger's base (mounted on a body) starts ``max(3 r_infl, BASE_TRIM L)`` further along
+    it; ``skip`` ``(n,)`` where that trims the whole segment. Returns ``(A2 (n, 3), skip (n,))``."""
+    D = B - A
+    L = np.sqrt((D * D).sum(axis=1))
+    Ab = A - base
+    at_base = (Ab * Ab).sum(axis=1) < 1e-18
+    trim = np.maximum(3.0 * r_infl, BASE_TRIM * L)
+    skip = at_base & (2.0 * trim >= L)
+    A2 = np.where(at_base[:, None], A + D * (trim / np.where(L > 0, L, 1.0))[:, None], A)
+    return A2, skip
+
 @dataclass(frozen=True)
 class _FingerData:
     """Static data of one finger for the vectorised clearance."""
@@ -494,13 +508,7 @@ class CollisionModel:
                     pd = pd - al[2 * n:][need]
                 best = min(best, float(pd.min()))
         if fd.any_fixed:
-            D = B - A
-            L = np.sqrt((D * D).sum(axis=1))
-            Ab = A - fd.base
-            at_base = (Ab * Ab).sum(axis=1) < 1e-18
-            trim = np.maximum(3.0 * fd.r_infl, BASE_TRIM * L)
-            skip = at_base & (2.0 * trim >= L)
-            A2 = np.where(at_base[:, None], A + D * (trim / np.where(L > 0, L, 1.0))[:, None], A)
+            A2, skip = _trimmed_at_base(A, B, fd.base, fd.r_infl)
             checked = fd.fixed_checked & ~skip
             al_f = al[n:2 * n] if al is not None else np.zeros(n)
             bounded = all(isinstance(fb.shape, Disk | Sphere | Box | Segment) for fb in self.scene.fixed_bodies)
@@ -566,13 +574,7 @@ class CollisionModel:
             fixed = np.array([geo.distance(c, geo.fixed) if ok else np.inf
                               for c, ok in zip(cores, fd.fixed_checked, strict=True)])
         elif fd.any_fixed:
-            D = B - A
-            L = np.sqrt((D * D).sum(axis=1))
-            Ab = A - fd.base
-            at_base = (Ab * Ab).sum(axis=1) < 1e-18
-            trim = np.maximum(3.0 * fd.r_infl, BASE_TRIM * L)
-            skip = at_base & (2.0 * trim >= L)
-            A2 = np.where(at_base[:, None], A + D * (trim / np.where(L > 0, L, 1.0))[:, None], A)
+            A2, skip = _trimmed_at_base(A, B, fd.base, fd.r_infl)
             dist = np.full(n, np.inf)
             for fb in self.scene.fixed_bodies:
                 dist = np.minimum(dist, _shape_segments_distance(fb.shape, A2, B, d, self.sample_step))

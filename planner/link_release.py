@@ -34,15 +34,14 @@ from analysis.exceptions import SceneError
 from analysis.geometry import shape_signed_distance
 from analysis.kinematics import BodyRef
 from analysis.mesh import load_mesh
-from analysis.regrasp import regrasp_cone
 from analysis.scene import Mesh
 from planner.collision import path_clearance_certified
 from planner.ik import joint_limits
 from planner.nodes import GraphNodes
 from planner.object_motion import keep_contacts, project_contacts
-from planner.release_edges import separating_motion
+from planner.release_edges import release_check, release_edge
 from planner.state import GraspState
-from planner.transition import ReleaseFigures, Transition
+from planner.transition import Transition
 
 #: joint-space step (rad) of the release motion, as the whole-finger retreat
 STEP = 0.02
@@ -78,35 +77,17 @@ def link_release_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Trans
                 continue
             if sa is None:
                 sa = nodes.analysis(state)
-            comb = "".join("D" if i in released else ("F" if c.mu > 0 else "N")
-                           for i, c in enumerate(state.contacts))
-            with nodes.timings.measure("analysis"):
-                grasp = sa.stationary(comb)
-                if grasp is not None:
-                    p = sa.parts(comb)
-                    cone = regrasp_cone(p.system, p.sel, p.ms, p.st, p.fs)
-                    dq, rate = separating_motion(cone.rays, cone.lines, cone.J_d, cone.feasible)
-            if grasp is None:
-                nodes.reject("no stationary grasp (18) of the remaining contacts")
-                continue
-            if dq is None or not cone.contains(dq):
-                nodes.reject("regrasp cone (33) has no motion separating the released contacts")
+            checked = release_check(nodes, sa, state, released)
+            if checked is None:
                 continue
             keep = [i for i in range(state.L) if i not in released]
-            path = release_link(nodes, state, f, dq, keep, released)
+            path = release_link(nodes, state, f, checked.dq, keep, released)
             if path is None:
                 nodes.reject(f"link cannot come off the object without collision ({body})")
                 continue
-            new = keep_contacts(state, keep, path[-1])
-            if nodes.held(new) is None:
-                continue
-            length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
-            cost = length + nodes.options.effort_weight * float(np.linalg.norm(grasp.tau))
-            figures = ReleaseFigures(grasp.margin, rate, int(cone.rays.shape[0]), int(cone.lines.shape[0]),
-                                     hand.fingers[f].name, length)
-            t = Transition("release", comb, state.bodies(), new.bodies(), path,
-                           np.tile(state.pose_vector(), (len(path), 1)), grasp.tau, grasp.tau, None, figures, cost)
-            out.append((t, new))
+            edge = release_edge(nodes, state, f, checked, keep, path)
+            if edge is not None:
+                out.append(edge)
     return out
 
 

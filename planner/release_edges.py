@@ -9,17 +9,20 @@ on the remaining contacts, until it is clear of the object (:func:`retreat`, cer
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from analysis._types import Array
 from analysis.kinematics import BodyRef
-from analysis.regrasp import regrasp_cone
+from analysis.regrasp import RegraspCone, regrasp_cone
 from analysis.solvers.highs import solve_lp
+from analysis.stationary import StationaryGrasp
 from planner.collision import path_clearance_certified
 from planner.ik import joint_limits
 from planner.nodes import GraphNodes
 from planner.object_motion import keep_contacts, project_contacts
-from planner.state import GraspState
+from planner.state import GraspState, StateAnalysis
 from planner.transition import ReleaseFigures, Transition
 
 
@@ -37,36 +40,66 @@ def release_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Transition
         if len(released) == state.L:
             nodes.reject("releasing a finger would leave no contact")
             continue
-        comb = "".join("D" if i in released else ("F" if c.mu > 0 else "N")
-                       for i, c in enumerate(state.contacts))
-        with nodes.timings.measure("analysis"):
-            grasp = sa.stationary(comb)
-            if grasp is not None:
-                p = sa.parts(comb)
-                cone = regrasp_cone(p.system, p.sel, p.ms, p.st, p.fs)
-                dq, rate = separating_motion(cone.rays, cone.lines, cone.J_d, cone.feasible)
-        if grasp is None:
-            nodes.reject("no stationary grasp (18) of the remaining contacts")
-            continue
-        if dq is None or not cone.contains(dq):
-            nodes.reject("regrasp cone (33) has no motion separating the released contacts")
+        checked = release_check(nodes, sa, state, released)
+        if checked is None:
             continue
         keep = [i for i in range(state.L) if i not in released]
-        path = retreat(nodes, state, f, dq, keep)
+        path = retreat(nodes, state, f, checked.dq, keep)
         if path is None:
             nodes.reject("finger cannot retreat from the object without collision")
             continue
-        new = keep_contacts(state, keep, path[-1])
-        if nodes.held(new) is None:
-            continue
-        length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
-        cost = length + options.effort_weight * float(np.linalg.norm(grasp.tau))
-        figures = ReleaseFigures(grasp.margin, rate, int(cone.rays.shape[0]), int(cone.lines.shape[0]),
-                                 hand.fingers[f].name, length)
-        t = Transition("release", comb, state.bodies(), new.bodies(), path,
-                       np.tile(state.pose_vector(), (len(path), 1)), grasp.tau, grasp.tau, None, figures, cost)
-        out.append((t, new))
+        edge = release_edge(nodes, state, f, checked, keep, path)
+        if edge is not None:
+            out.append(edge)
     return out
+
+
+@dataclass(frozen=True)
+class ReleaseCheck:
+    """What eq. (33) gives a release: the combination (released contacts ``D``), its stationary
+    grasp (18), the regrasp cone and the separating motion ``dq`` ``(M,)`` in it, at ``rate``."""
+
+    combination: str
+    grasp: StationaryGrasp
+    cone: RegraspCone
+    dq: Array  # (M,)
+    rate: float
+
+
+def release_check(nodes: GraphNodes, sa: StateAnalysis, state: GraspState, released: list[int]) -> ReleaseCheck | None:
+    """The checks of eq. (18) and (33) for letting go of the contacts ``released`` (the others
+    stick, or are frictionless), or None with the reason counted in ``nodes``."""
+    comb = "".join("D" if i in released else ("F" if c.mu > 0 else "N") for i, c in enumerate(state.contacts))
+    with nodes.timings.measure("analysis"):
+        grasp = sa.stationary(comb)
+        if grasp is not None:
+            p = sa.parts(comb)
+            cone = regrasp_cone(p.system, p.sel, p.ms, p.st, p.fs)
+            dq, rate = separating_motion(cone.rays, cone.lines, cone.J_d, cone.feasible)
+    if grasp is None:
+        nodes.reject("no stationary grasp (18) of the remaining contacts")
+        return None
+    if dq is None or not cone.contains(dq):
+        nodes.reject("regrasp cone (33) has no motion separating the released contacts")
+        return None
+    return ReleaseCheck(comb, grasp, cone, dq, rate)
+
+
+def release_edge(nodes: GraphNodes, state: GraspState, finger: int, checked: ReleaseCheck, keep: list[int],
+                 path: Array) -> tuple[Transition, GraspState] | None:
+    """The release transition along the finger's ``path`` ``(n, M)`` and the state it leads to
+    (the contacts ``keep``), or None when that state does not hold the object."""
+    new = keep_contacts(state, keep, path[-1])
+    if nodes.held(new) is None:
+        return None
+    grasp, cone = checked.grasp, checked.cone
+    length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
+    cost = length + nodes.options.effort_weight * float(np.linalg.norm(grasp.tau))
+    figures = ReleaseFigures(grasp.margin, checked.rate, int(cone.rays.shape[0]), int(cone.lines.shape[0]),
+                             nodes.hand.fingers[finger].name, length)
+    t = Transition("release", checked.combination, state.bodies(), new.bodies(), path,
+                   np.tile(state.pose_vector(), (len(path), 1)), grasp.tau, grasp.tau, None, figures, cost)
+    return t, new
 
 
 def retreat(nodes: GraphNodes, state: GraspState, finger: int, dq: Array, keep: list[int]) -> Array | None:
