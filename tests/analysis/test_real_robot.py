@@ -713,7 +713,21 @@ def test_perturbations_change_no_verdict(path: Path) -> None:
                              + "; ".join(_diff(changed, base)))
 
 
-@pytest.mark.parametrize("path", _example_params())
+def _mirror_params() -> list[Any]:
+    """The examples, but for those whose fingers use their URDF collision shapes: the mirror goes
+    through axis/origin chains (:func:`mirror_scene`), which have capsules only, so the contacts
+    placed on the URDF shapes are off the capsules (and the loader refuses them)."""
+    out = []
+    for p in _example_params():
+        path = p.values[0]
+        urdf_geometry = any(f.get("link_geometry") == "urdf" for f in _raw(path)["fingers"])
+        marks = list(p.marks) + ([pytest.mark.skip(reason="URDF collision geometry has no axis/origin chain form")]
+                                 if urdf_geometry else [])
+        out.append(pytest.param(path, id=p.id, marks=marks))
+    return out
+
+
+@pytest.mark.parametrize("path", _mirror_params())
 def test_mirror_changes_no_verdict(path: Path) -> None:
     """The mirror image of the scene (contacts in the same order): the same verdicts."""
     data = _raw(path)
