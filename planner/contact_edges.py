@@ -25,7 +25,7 @@ from planner.ik import fingertip_ik
 from planner.nodes import GraphNodes
 from planner.search import Successor
 from planner.state import GraspContact, GraspState, all_f
-from planner.transfer import plan_transfer
+from planner.transfer import plan_transfer, transfer_key
 from planner.transition import ContactFigures, Transition
 
 
@@ -173,9 +173,13 @@ def validate_contact(nodes: GraphNodes, state: GraspState, new: GraspState, f: i
     """The lazy check of a contact edge: the OMPL transfer of finger ``f`` to the touching
     configuration ``qg`` and the new grasp's stationary grasp (18); ``(cost, transition)`` or None."""
     hand, options = nodes.hand, nodes.options
-    with nodes.timings.measure("ompl"):
-        tp = plan_transfer(nodes.model, state, f, qg, tip_ref, options.approach * nodes.size,
-                           seed=options.seed, time_limit=options.ompl_time, checks=options.ompl_checks)
+    approach = options.approach * nodes.size
+    key = transfer_key(nodes.model, state, f, qg, tip_ref, approach, options.seed, options.ompl_checks)
+    if key not in nodes.transfers:  # the same transfer from another state: same answer (transfer_key)
+        with nodes.timings.measure("ompl"):
+            nodes.transfers[key] = plan_transfer(nodes.model, state, f, qg, tip_ref, approach, seed=options.seed,
+                                                 time_limit=options.ompl_time, checks=options.ompl_checks)
+    tp = nodes.transfers[key]
     if tp is None:
         nodes.reject("OMPL found no collision-free transfer to a new contact")
         return None

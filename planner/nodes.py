@@ -24,6 +24,7 @@ from planner.goals import Goal
 from planner.options import PlannerOptions
 from planner.state import AnalysisCache, GraspState, StateAnalysis, all_f
 from planner.timings import Timings
+from planner.transfer import TransferPath
 
 
 @dataclass
@@ -46,6 +47,8 @@ class GraphNodes:
         mus = [c.mu for c in self.scene.contacts if c.mu > 0]
         self.default_mu = float(min(mus)) if mus else 0.0  # friction of new contacts
         self.ik_cache: dict[tuple[Any, ...], list[Array]] = {}  # IK solutions of new contacts
+        #: OMPL transfers (None: none found) by :func:`planner.transfer.transfer_key`
+        self.transfers: dict[tuple[Any, ...], TransferPath | None] = {}
 
     def add(self, state: GraspState, validated: bool = True) -> Any:
         """Register a state; a validated one (reached by a checked edge) is never replaced."""

@@ -7,12 +7,19 @@ plans to a pre-contact configuration backed off by ``approach`` along the last l
 :func:`~planner.collision.path_clearance_certified` then checks the whole path (every
 configuration, not only samples, is collision-free; overlaps present at the start may persist but
 not deepen).
+
+A transfer depends on the finger's own joints, the joints of the fingers it is checked against
+(:attr:`~planner.collision.CollisionModel.finger_pairs`), the object pose and the query's
+settings, and on nothing else (:func:`transfer_key`): the search asks for the same transfer from
+many grasp states that differ only in the other fingers (a finger released, another re-placed),
+and :class:`planner.nodes.GraphNodes` keeps each answer under its key.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from ompl import base as ob
@@ -37,6 +44,31 @@ class TransferPath:
     clearance: float  # smallest clearance along the free part
     checks: int
     ompl_seconds: float
+
+
+def transfer_key(
+    model: CollisionModel,
+    state: GraspState,
+    finger: int,
+    q_goal: Array,
+    tip_ref: BodyRef,
+    approach: float,
+    seed: int,
+    checks: int,
+) -> tuple[Any, ...]:
+    """Everything :func:`plan_transfer` depends on, exactly (as bytes): the finger, its joints and
+    those of the fingers it is checked against in ``state.q``, the object pose, the goal
+    configuration, the touching link, the approach and the OMPL seed and check budget. The
+    validity checker, the start allowance, the back-off and the certificate read nothing else,
+    so two queries with one key get the same answer (OMPL is seeded, its end counted in checks)."""
+    hand = model.hand
+    partners = [j for j in range(len(hand.fingers))
+                if j == finger or (min(j, finger), max(j, finger)) in model.finger_pairs]
+    q = np.asarray(state.q, dtype=float)
+    joints = tuple(q[hand.finger_slice(j)].tobytes() for j in partners)
+    return (finger, tuple(partners), joints, np.asarray(state.position, dtype=float).tobytes(),
+            np.asarray(state.rotation, dtype=float).tobytes(), np.asarray(q_goal, dtype=float).tobytes(),
+            tip_ref.name, float(approach), int(seed), int(checks))
 
 
 def plan_transfer(
