@@ -453,6 +453,89 @@ class CollisionModel:
             terms = terms - allowance
         return float(terms.min()) if terms.size else float(np.inf)
 
+    def finger_clearances(
+        self,
+        finger: int,
+        q: Array,
+        X: Array,
+        position: Array,
+        rotation: Array,
+        allowance: Array | None = None,
+    ) -> Array:
+        """:meth:`finger_clearance` (no link touching) at many configurations at once: ``X``
+        ``(N, m)`` the joints of ``finger``, every other joint as in ``q`` ``(M,)``; returns ``(N,)``.
+
+        Capsule serial chains: every term of :meth:`clearance_terms` for the ``N`` configurations
+        in one pass (forward kinematics and distances vectorised over them), the minimum of
+        ``terms - allowance`` per configuration. Other fingers (URDF shapes, a mesh object): one
+        :meth:`finger_clearance` per configuration."""
+        fd = self._finger_data(finger)
+        X = np.asarray(X, dtype=float)
+        N = X.shape[0]
+        if fd.urdf or fd.coal_object or fd.rot_K is None or N == 0:
+            out = np.empty(N)
+            qq = np.array(q, dtype=float)
+            sl = self.hand.finger_slice(finger)
+            for k in range(N):
+                qq[sl] = X[k]
+                out[k] = self.finger_clearance(finger, qq, position, rotation, (), allowance)
+            return out
+        n = len(fd.refs)
+        d = self.scene.dim
+        A, B = self._segment_arrays_many(finger, X)  # (N, n, d) each
+        R = np.asarray(rotation, dtype=float)[:d, :d]
+        pos = np.asarray(position, dtype=float)[:d]
+        Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
+        od = _shape_segments_distance(self.scene.object.shape, (Af - pos) @ R, (Bf - pos) @ R, d, self.sample_step)
+        parts = [od.reshape(N, n) - fd.r_infl]  # (N, n) object
+        if fd.any_fixed:
+            r_all = np.tile(fd.r_infl, N)  # (N n,)
+            A2, skip = _trimmed_at_base(Af, Bf, fd.base, r_all)
+            dist = np.full(N * n, np.inf)
+            for fb in self.scene.fixed_bodies:
+                dist = np.minimum(dist, _shape_segments_distance(fb.shape, A2, Bf, d, self.sample_step))
+            parts.append(np.where(np.tile(fd.fixed_checked, N) & ~skip, dist - r_all, np.inf).reshape(N, n))
+        else:
+            parts.append(np.full((N, n), np.inf))
+        i, j = fd.pairs[:, 0], fd.pairs[:, 1]
+        if len(i):  # own non-adjacent pairs, then the links of the fingers checked against this one
+            others = [k for k in range(len(self.hand.fingers))
+                      if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
+            segs = [self._segments_cached(k, q) for k in others]
+            S0 = np.concatenate([A, *(np.broadcast_to(sg[0], (N, *sg[0].shape)) for sg in segs)], axis=1)
+            S1 = np.concatenate([B, *(np.broadcast_to(sg[1], (N, *sg[1].shape)) for sg in segs)], axis=1)
+            p = len(i)
+            pd = segment_segment_distances(S0[:, i].reshape(N * p, d), S1[:, i].reshape(N * p, d),
+                                           S0[:, j].reshape(N * p, d), S1[:, j].reshape(N * p, d))
+            parts.append(pd.reshape(N, p) - fd.pair_radii)
+        terms = np.concatenate(parts, axis=1)  # (N, terms), laid out as clearance_terms
+        if allowance is not None:
+            terms = terms - allowance
+        return np.asarray(terms.min(axis=1))
+
+    def _segment_arrays_many(self, finger: int, X: Array) -> tuple[Array, Array]:
+        """:meth:`segment_arrays` of a capsule serial chain at the joints ``X`` ``(N, m)`` of the
+        finger: ``(N, n, dim)``, ``(N, n, dim)``."""
+        chain = self.hand.fingers[finger]
+        assert isinstance(chain, SerialChain)
+        fd = self._finger_data(finger)
+        assert fd.rot_K is not None
+        d = self.scene.dim
+        n = len(fd.refs)
+        N = X.shape[0]
+        A = np.empty((N, n, 3))
+        B = np.empty((N, n, 3))
+        R = np.broadcast_to(chain.base_R, (N, 3, 3))
+        p = np.broadcast_to(chain.base_p, (N, 3))
+        for k in range(n):
+            p = p + R @ chain.origins[k]
+            K, K2 = fd.rot_K[k]
+            s, c = np.sin(X[:, k]), 1.0 - np.cos(X[:, k])
+            R = R @ (_EYE3 + s[:, None, None] * K + c[:, None, None] * K2)
+            end = chain.origins[k + 1] if k + 1 < n else chain.tip
+            A[:, k], B[:, k] = p, p + R @ end
+        return A[:, :, :d], B[:, :, :d]
+
     def _capsule_clearance_min(
         self,
         fd: _FingerData,

@@ -63,6 +63,43 @@ def _ik_solver(chain: SerialChain, dim: int) -> Any:
     return solver
 
 
+def alignment_bound(chain: SerialChain, target: Array) -> Array | None:
+    """For a chain whose links after the first joint move in one plane (a yaw joint, then joints
+    with parallel axes ``a`` perpendicular to it: a finger that turns about its base and bends),
+    the unit normal ``(3,)`` of the plane the chain must lie in to put its tip at ``target``; the
+    last link then points along a direction of that plane. ``None`` for any other chain, or when
+    ``target`` lies on the yaw axis (every plane through the axis holds it).
+
+    The plane: every joint after the first turns about ``a_1 = R_0 a`` (rotations about ``a`` keep
+    it), which is perpendicular to the yaw axis ``z``; the second joint sits on the yaw axis
+    (``origin_1`` along it) and the later origins and the tip are perpendicular to ``a``, so the
+    links, the tip and the last link's direction lie in the plane through the second joint normal
+    to ``a_1``. That plane holds ``target`` and the yaw axis: ``a_1 = +-(z x (target - p_1))``."""
+    n = chain.n_joints
+    if n < 2:
+        return None
+    ax = chain.axes / np.linalg.norm(chain.axes, axis=1)[:, None]  # (n, 3), joint frames
+    a = ax[1]
+    if not all(abs(abs(float(ax[k] @ a)) - 1.0) < 1e-12 for k in range(2, n)):
+        return None  # the later joints are not parallel to the second
+    if abs(float(ax[0] @ a)) > 1e-12 or np.linalg.norm(np.cross(chain.origins[1], ax[0])) > 1e-12:
+        return None  # the second joint is not perpendicular to the yaw axis, or not on it
+    if any(abs(float(v @ a)) > 1e-12 for v in (*chain.origins[2:], chain.tip)):
+        return None  # a later link leaves the plane
+    z = chain.base_R @ ax[0]  # (3,) world yaw axis
+    p1 = chain.base_p + chain.base_R @ (chain.origins[0] + chain.origins[1])  # (3,) on the yaw axis
+    c = np.cross(z, np.asarray(target, dtype=float)[:3] - p1)
+    nc = float(np.linalg.norm(c))
+    if nc < 1e-9:
+        return None
+    return np.asarray(c / nc)
+
+
+#: IK target alignment that no solution can reach by this much is not solved (IPOPT's constraint
+#: tolerance is 1e-4 at most, so no solve that could succeed is skipped)
+ALIGNMENT_MARGIN = 1e-3
+
+
 def joint_limits(hand: HandKinematics, finger: int) -> tuple[Array, Array]:
     """Lower and upper joint limits ``(n,)`` of a finger (a URDF finger's ``lower``/``upper``;
     unbounded for scene serial chains)."""
@@ -151,6 +188,12 @@ def fingertip_ik(
             if x is not None and all(np.linalg.norm(x - o) > 1e-6 for o in out):
                 out.append(x)
         return out
+    if d == 3 and (plane := alignment_bound(chain, target)) is not None:
+        # the last link lies in the plane of normal `plane`: its best alignment with `normal` is
+        # the length of the normal's projection on that plane; below min_alignment, no solution
+        nu = np.asarray(normal, dtype=float)[:3] / float(np.linalg.norm(normal))
+        if float(np.linalg.norm(nu - (nu @ plane) * plane)) < min_alignment - ALIGNMENT_MARGIN:
+            return out
     solver = _ik_solver(chain, d)
     lbg = np.r_[np.zeros(d), min_alignment]
     ubg = np.r_[np.zeros(d), np.inf]

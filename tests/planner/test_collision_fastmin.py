@@ -59,3 +59,30 @@ def test_culled_min_equals_every_term(name: str, monkeypatch: pytest.MonkeyPatch
     # the object block is always evaluated (1 call each); most pair/fixed blocks are skipped
     total = 150 * len(hand.fingers)
     assert total <= n_eval < 2 * total
+
+
+@pytest.mark.parametrize("name", ["sphere_four_finger_palm", "planar_disk_envelope", "baxter_hug_box"])
+def test_many_configurations_at_once_equal_one_at_a_time(name: str) -> None:
+    """``finger_clearances`` (N configurations in one pass) is ``finger_clearance`` of each, bit for
+    bit, with and without an allowance; on Baxter (fingers checked against each other, URDF
+    chains) it goes one configuration at a time."""
+    scene = load_scene(ROOT / "examples" / f"{name}.json")
+    hand = HandKinematics.from_scene(scene)
+    model = CollisionModel.of(scene, hand)
+    pos = np.asarray(scene.object.pose.position, dtype=float)
+    rot = np.eye(3)
+    rng = np.random.default_rng(11)
+    for f in range(len(hand.fingers)):
+        sl = hand.finger_slice(f)
+        X = hand.q0[sl] + rng.normal(0.0, 0.6, (40 if name != "baxter_hug_box" else 6, sl.stop - sl.start))
+        allow = np.minimum(0.0, rng.normal(0.0, 0.01, model.clearance_terms(f, hand.q0, pos, rot).size))
+        for al in (None, allow):
+            got = model.finger_clearances(f, hand.q0, X, pos, rot, al)
+            q = hand.q0.copy()
+            want = []
+            for x in X:
+                q[sl] = x
+                want.append(model.finger_clearance(f, q, pos, rot, (), al))
+            np.testing.assert_array_equal(got, np.array(want))
+            if name != "baxter_hug_box":  # (its arms press on the box about q0: all in contact)
+                assert np.any(got < 0.0) and np.any(got >= 0.0)  # both verdicts occur

@@ -5,12 +5,14 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from ompl import base as ob
 
 from analysis.kinematics import BodyRef
 from analysis.scene import Scene
+from planner.budget import CheckBudget
 from planner.collision import DENSE_STEP, CollisionModel
 from planner.ik import fingertip_ik
-from planner.transfer import plan_transfer, transfer_key
+from planner.transfer import _bisection_order, _SegmentValidator, plan_transfer, transfer_key
 
 
 def _dense_check(model: CollisionModel, finger: int, q_full: np.ndarray, path: np.ndarray, st,  # type: ignore[no-untyped-def]
@@ -70,3 +72,45 @@ def test_transfer_key_holds_what_the_transfer_depends_on(planar_scene: Scene, fr
     assert transfer_key(model, moved, 0, goal, tip, 0.05, 3, 300) != key
     assert transfer_key(model, st, 0, goal + 1e-9, tip, 0.05, 3, 300) != key
     assert transfer_key(model, st, 0, goal, tip, 0.05, 4, 300) != key
+
+
+def test_segment_validator_checks_what_ompls_discrete_validator_checks() -> None:
+    """``_bisection_order`` is the order of OMPL's DiscreteMotionValidator (middle first, then the
+    middles of the halves, breadth first) and visits every inner state once; the validator
+    answers like checking each state on its own and counts the checks up to the first invalid."""
+    assert _bisection_order(1).tolist() == []
+    assert _bisection_order(2).tolist() == [1]
+    assert _bisection_order(8).tolist() == [4, 2, 6, 1, 3, 5, 7]
+    for nd in range(2, 60):
+        assert sorted(_bisection_order(nd).tolist()) == list(range(1, nd))
+    space = ob.RealVectorStateSpace(2)
+    bounds = ob.RealVectorBounds(2)
+    bounds.setLow(-2.0)
+    bounds.setHigh(2.0)
+    space.setBounds(bounds)
+    si = ob.SpaceInformation(space)
+    si.setStateValidityCheckingResolution(0.01)
+    si.setup()
+    budget = CheckBudget(10**6, 60.0)
+    wall = 0.3  # states with x > wall are invalid
+
+    def valid_many(X: np.ndarray) -> np.ndarray:
+        return np.asarray(X[:, 0] <= wall)
+
+    mv = _SegmentValidator(si, space, 2, valid_many, budget)
+    a, b = space.allocState(), space.allocState()
+    a[0], a[1] = -1.0, 0.0
+    b[0], b[1] = 0.2, 0.5
+    nd = space.validSegmentCount(a, b)
+    assert mv.checkMotion(a, b) and budget.used == nd  # the end and the nd - 1 inner states
+    b[0] = 0.9
+    budget.used = 0
+    assert not mv.checkMotion(a, b) and budget.used == 1  # the end is invalid: one check
+    b[0] = 0.29
+    a[0] = 0.31  # the start itself is not checked (OMPL assumes it valid); the end is valid
+    budget.used = 0
+    nd = space.validSegmentCount(a, b)
+    order = _bisection_order(nd)
+    states = 0.31 + (0.29 - 0.31) * order / nd
+    first_bad = int(np.flatnonzero(states > wall)[0])
+    assert not mv.checkMotion(a, b) and budget.used == 1 + first_bad + 1
