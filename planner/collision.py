@@ -461,9 +461,10 @@ class CollisionModel:
         position: Array,
         rotation: Array,
         allowance: Array | None = None,
+        touching: Sequence[BodyRef] = (),
     ) -> Array:
-        """:meth:`finger_clearance` (no link touching) at many configurations at once: ``X``
-        ``(N, m)`` the joints of ``finger``, every other joint as in ``q`` ``(M,)``; returns ``(N,)``.
+        """:meth:`finger_clearance` at many configurations at once: ``X`` ``(N, m)`` the joints of
+        ``finger``, every other joint as in ``q`` ``(M,)``; returns ``(N,)``.
 
         Capsule serial chains: every term of :meth:`clearance_terms` for the ``N`` configurations
         in one pass (forward kinematics and distances vectorised over them), the minimum of
@@ -478,7 +479,7 @@ class CollisionModel:
             sl = self.hand.finger_slice(finger)
             for k in range(N):
                 qq[sl] = X[k]
-                out[k] = self.finger_clearance(finger, qq, position, rotation, (), allowance)
+                out[k] = self.finger_clearance(finger, qq, position, rotation, touching, allowance)
             return out
         n = len(fd.refs)
         d = self.scene.dim
@@ -487,7 +488,12 @@ class CollisionModel:
         pos = np.asarray(position, dtype=float)[:d]
         Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         od = _shape_segments_distance(self.scene.object.shape, (Af - pos) @ R, (Bf - pos) @ R, d, self.sample_step)
-        parts = [od.reshape(N, n) - fd.r_infl]  # (N, n) object
+        touch = np.zeros(n, dtype=bool)
+        for t in touching:
+            if t.finger == finger and t.link is not None:
+                touch[min(int(t.link), n - 1)] = True
+        od = od.reshape(N, n)
+        parts = [np.where(touch, np.maximum(0.0, od - fd.r_true + 1e-9), od - fd.r_infl)]  # (N, n) object
         if fd.any_fixed:
             r_all = np.tile(fd.r_infl, N)  # (N n,)
             A2, skip = _trimmed_at_base(Af, Bf, fd.base, r_all)
@@ -853,16 +859,21 @@ def path_clearance_certified(
     touch_from: int | None = None,
     allowance: Array | None = None,
 ) -> tuple[bool, float, int]:
-    """Check the whole polyline ``path`` (not only its samples): from each checked configuration
-    the next one is at most ``clearance / K`` away in joint space (so every configuration in
-    between is collision-free), never less than :data:`DENSE_STEP`. Segments from waypoint
-    ``touch_from`` on may touch the object with the links ``touching_last``.
+    """Check the whole polyline ``path`` (not only its samples). A configuration with clearance
+    ``c >= 0`` is clear within ``c / K`` of it in joint space (``|dx| <= K |dq|``,
+    :meth:`CollisionModel.lipschitz`), so two checked configurations ``h`` apart on a segment
+    certify the part between them when ``c_a + c_b >= K h``, or when ``h <= DENSE_STEP`` (the
+    floor of the dense check). Each segment is bisected from its two ends: every part not yet
+    certified is halved and its middle checked, the middles of one round all at once
+    (:meth:`CollisionModel.finger_clearances`), until every part is certified or a configuration
+    collides. Segments from waypoint ``touch_from`` on may touch the object with the links
+    ``touching_last``.
 
     Overlaps present at the first waypoint (``allowance``, by default
     :meth:`CollisionModel.start_allowance` there) may persist but not deepen: the clearance
     checked is ``min(term - allowance)`` over every (link, obstacle) term.
 
-    Returns ``(collision_free, smallest clearance, configurations checked)``."""
+    Returns ``(collision_free, smallest clearance checked, configurations checked)``."""
     K = model.lipschitz(finger)
     sl = model.hand.finger_slice(finger)
     q = np.array(q_full, dtype=float)
@@ -872,17 +883,34 @@ def path_clearance_certified(
     worst, checks = np.inf, 0
     for s in range(len(path) - 1):
         touching = touching_last if touch_from is not None and s >= touch_from else ()
-        p0, p1 = path[s], path[s + 1]
+        p0, p1 = np.asarray(path[s], dtype=float), np.asarray(path[s + 1], dtype=float)
         L = float(np.linalg.norm(p1 - p0))
-        t = 0.0
+
+        def clear(t: Array, p0: Array = p0, p1: Array = p1, L: float = L,
+                  touching: Sequence[BodyRef] = touching) -> Array:
+            X = p0[None, :] + (p1 - p0)[None, :] * (t / L if L > 0 else 0.0 * t)[:, None]  # (k, m)
+            return model.finger_clearances(finger, q, X, position, rotation, allowance, touching)
+
+        ends = np.array([0.0, L]) if L > 0 else np.zeros(1)
+        c = clear(ends)
+        checks += len(c)
+        worst = min(worst, float(c.min()))
+        if worst < 0.0:
+            return False, float(worst), checks
+        if L == 0:
+            continue
+        ta, tb, ca, cb = ends[:1], ends[1:], c[:1], c[1:]  # the parts not yet certified
         while True:
-            q[sl] = p0 + (p1 - p0) * (t / L if L > 0 else 0.0)
-            c = model.finger_clearance(finger, q, position, rotation, touching, allowance)
-            checks += 1
-            worst = min(worst, c)
-            if c < 0.0:
-                return False, worst, checks
-            if t >= L:
+            open_ = (ca + cb < K * (tb - ta)) & (tb - ta > DENSE_STEP)
+            if not open_.any():
                 break
-            t = min(L, t + max(DENSE_STEP, c / K))
+            ta, tb, ca, cb = ta[open_], tb[open_], ca[open_], cb[open_]
+            tm = 0.5 * (ta + tb)
+            cm = clear(tm)
+            checks += len(cm)
+            worst = min(worst, float(cm.min()))
+            if worst < 0.0:
+                return False, float(worst), checks
+            ta, tb = np.concatenate([ta, tm]), np.concatenate([tm, tb])
+            ca, cb = np.concatenate([ca, cm]), np.concatenate([cm, cb])
     return True, float(worst), checks

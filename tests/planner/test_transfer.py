@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import replace
 
 import numpy as np
@@ -10,7 +11,7 @@ from ompl import base as ob
 from analysis.kinematics import BodyRef
 from analysis.scene import Scene
 from planner.budget import CheckBudget
-from planner.collision import DENSE_STEP, CollisionModel
+from planner.collision import DENSE_STEP, CollisionModel, path_clearance_certified
 from planner.ik import fingertip_ik
 from planner.transfer import _bisection_order, _SegmentValidator, plan_transfer, transfer_key
 
@@ -114,3 +115,32 @@ def test_segment_validator_checks_what_ompls_discrete_validator_checks() -> None
     states = 0.31 + (0.29 - 0.31) * order / nd
     first_bad = int(np.flatnonzero(states > wall)[0])
     assert not mv.checkMotion(a, b) and budget.used == 1 + first_bad + 1
+
+
+def test_certificate_agrees_with_a_dense_check(planar_scene: Scene, free_left) -> None:  # type: ignore[no-untyped-def]
+    """``path_clearance_certified`` (bisection from the ends, a part certified by its two ends'
+    clearances) against an independent check every 1e-3 rad, on seeded random paths of the
+    left finger around the disk: a certified path never goes deeper than the dense floor allows
+    (``K * DENSE_STEP / 2`` between two checked configurations), and a refused one does collide
+    within that floor; both verdicts occur."""
+    hand, st = free_left
+    model = CollisionModel.of(planar_scene, hand)
+    K = model.lipschitz(0)
+    rng = np.random.default_rng(4)
+    verdicts = set()
+    allow = model.start_allowance(0, st.q, st.position, st.rotation)
+    for _ in range(25):
+        path = np.vstack([st.q[:2], st.q[:2] + rng.normal(0.0, 1.2, 2), st.q[:2] + rng.normal(0.0, 1.2, 2)])
+        ok, clear, checks = path_clearance_certified(model, 0, st.q, path, st.position, st.rotation)
+        # every 1e-3 rad (finger_clearances: one finger_clearance per row, bit for bit, tested in
+        # test_collision_fastmin)
+        dense = min(float(model.finger_clearances(
+            0, st.q, a + np.linspace(0.0, 1.0, int(np.ceil(np.linalg.norm(b - a) / DENSE_STEP)) + 1)[:, None] * (b - a),
+            st.position, st.rotation, allow).min()) for a, b in itertools.pairwise(path))
+        verdicts.add(ok)
+        if ok:
+            assert dense >= -K * DENSE_STEP / 2 and clear >= 0.0
+        else:
+            assert clear < 0.0 and dense < K * DENSE_STEP / 2
+        assert checks >= 2
+    assert verdicts == {True, False}
