@@ -36,6 +36,7 @@ from analysis.kinematics import BodyRef
 from analysis.mesh import load_mesh
 from analysis.scene import Mesh
 from planner.collision import path_clearance_certified
+from planner.goals import is_fingertip
 from planner.ik import joint_limits
 from planner.nodes import GraphNodes
 from planner.object_motion import keep_contacts, project_contacts
@@ -57,9 +58,11 @@ OVERLAP_SLACK = 0.1
 ROUNDING = 1e-12
 
 
-def link_release_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Transition, GraspState]]:
+def link_release_edges(nodes: GraphNodes, state: GraspState, keep_tips: bool = False
+                       ) -> list[tuple[Transition, GraspState]]:
     """Eq. (33), F -> D for the contacts of one body of a finger that touches with several bodies
-    (see the module docstring); one edge per (finger, body)."""
+    (see the module docstring); one edge per (finger, body). With ``keep_tips`` only the releases
+    after which the finger still touches with its tip (:func:`planner.goals.is_fingertip`)."""
     hand = nodes.hand
     out: list[tuple[Transition, GraspState]] = []
     by_finger: dict[int, dict[str, list[int]]] = {}
@@ -72,6 +75,9 @@ def link_release_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Trans
         if len(bodies) < 2:
             continue
         for body, released in bodies.items():
+            if keep_tips and not any(is_fingertip(hand, state.contacts[i]) for b, idx in bodies.items()
+                                     if b != body for i in idx):
+                continue  # the finger would be left without its tip on the object
             if not _goal_lets_go(nodes, state, released):
                 nodes.reject("combination goal keeps the contact")
                 continue

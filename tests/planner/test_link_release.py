@@ -138,3 +138,23 @@ def test_minimal_motion_keeps_the_contact_motion_with_least_norm(baxter: Scene) 
         null = Vt[int(np.sum(s > 1e-10 * s[0])):]
         np.testing.assert_allclose(null @ u, 0.0, rtol=0, atol=1e-10)
         assert null.shape[0] >= 1  # Baxter's arm beyond its forearm moves no contact
+
+
+def test_towards_fingertip_goals_a_finger_keeps_its_tip_when_it_lets_go_of_a_body() -> None:
+    """``keep_tips`` (the searches towards active closure and fingertip grasps, planner.graph.
+    TIP_GOALS): the wrap's fingers touch with two inner links each, so none of their link releases
+    is offered (they let go with the whole finger), while without it some are; the Allegro thumb
+    may release its pad and keep its tip, not the other way round."""
+    wrap = load_scene(EXAMPLES / "sphere_four_finger_wrap.json")
+    hand = HandKinematics.from_scene(wrap)
+    st = state_from_scene(wrap, hand)
+    nodes = GraphNodes(wrap, hand, Goal(type="active"))
+    assert link_release_edges(nodes, st, keep_tips=True) == []
+    assert link_release_edges(nodes, st)  # the inner links can come off one by one
+    allegro = load_scene(EXAMPLES / "allegro_cylinder_urdf.json")
+    hand = HandKinematics.from_scene(allegro)
+    st = state_from_scene(allegro, hand)
+    nodes = GraphNodes(allegro, hand, Goal(type="active"))
+    edges = link_release_edges(nodes, st, keep_tips=True)
+    assert [[b for b in t.contacts_before if b not in t.contacts_after] for t, _ in edges] == [["thumb/link_15.0"]]
+    assert "thumb/link_15.0_tip" in edges[0][1].bodies()
