@@ -150,7 +150,26 @@ class NormalCone:
         return best
 
     def contains(self, u: Array, tol: float) -> bool:
-        """Whether the unit vector ``u`` is within ``tol`` (the sine of an angle) of the cone."""
+        """Whether the unit vector ``u`` is within ``tol`` (the sine of an angle) of the cone.
+
+        The distance is the smallest residual over the faces (:meth:`distance`); the rays, and the
+        planes spanned by two pairs of opposite rays (a bare segment's perpendiculars, whose cone is
+        that plane: the subset of the two rays on the side of ``u`` fits it with non-negative
+        coefficients), bound the distance from above, so a residual to one of them within ``tol``
+        (less a rounding margin) answers yes without the enumeration of every subset."""
+        u = np.asarray(u, dtype=float)
+        G = self.generators
+        if G.shape[0]:
+            along = G @ u  # (k,)
+            ray = np.sqrt(np.maximum(0.0, float(u @ u) - np.maximum(along, 0.0) ** 2))  # (k,) residual to each ray
+            if float(ray.min()) <= tol - 1e-12:
+                return True
+            opposite = [(i, j) for i, j in itertools.combinations(range(G.shape[0]), 2)
+                        if float(G[i] @ G[j]) < -1.0 + 1e-12]
+            for (i, _), (k, _) in itertools.combinations(opposite, 2):  # two lines: a plane
+                B = np.linalg.qr(np.stack([G[i], G[k]], axis=1))[0]  # (d, 2) orthonormal basis
+                if float(np.linalg.norm(u - B @ (B.T @ u))) <= tol - 1e-12:
+                    return True
         return self.distance(u) <= tol
 
 

@@ -90,14 +90,23 @@ class SerialChain:
         return None
 
     def frames(self, q: Array) -> tuple[list[Array], list[Array]]:
-        """World rotations and origins of the frames after each joint."""
+        """World rotations and origins of the frames after each joint (read-only arrays). The
+        last ``q`` asked for is remembered: a body pose, a point Jacobian and a link segment at
+        one configuration (a contact's rows, a clearance) share one pass along the chain."""
+        key = np.asarray(q, dtype=float)[: self.n_joints].tobytes()
+        last = self.__dict__.get("_frames_last")
+        if last is not None and last[0] == key:
+            return last[1]
         R, p = self.base_R, self.base_p
         Rs, ps = [], []
         for j in range(self.n_joints):
             p = p + R @ self.origins[j]
             R = R @ axis_angle_matrix(self.axes[j], float(q[j]))
+            R.setflags(write=False)
+            p.setflags(write=False)
             Rs.append(R)
             ps.append(p)
+        self.__dict__["_frames_last"] = (key, (Rs, ps))
         return Rs, ps
 
     def body_pose(self, k: int, q: Array) -> tuple[Array, Array]:

@@ -156,10 +156,12 @@ def segment_segment_distances(A0: Array, A1: Array, B0: Array, B1: Array) -> Arr
     return np.sqrt((diff * diff).sum(axis=1))
 
 
-def _shape_segments_distance(shape: object, A: Array, B: Array, dim: int, step: float) -> Array:
+def _shape_segments_distance(shape: object, A: Array, B: Array, dim: int, step: float,
+                             length: float | None = None) -> Array:
     """Signed distances ``(N,)`` from the segments ``[A[i], B[i]]`` (shape frame, ``(N, dim)``)
     to a shape: :func:`_shape_segment_distance` vectorised over the segments (boxes: sampled at
-    most ``step`` apart along every segment)."""
+    most ``step`` apart along every segment, the sample count from ``length``, by default the
+    longest segment)."""
     if isinstance(shape, Disk | Sphere):
         ab = B - A
         L2 = np.einsum("ij,ij->i", ab, ab)
@@ -172,7 +174,7 @@ def _shape_segments_distance(shape: object, A: Array, B: Array, dim: int, step: 
     if isinstance(shape, Box):
         c = np.asarray(shape.position if shape.position is not None else np.zeros(dim), dtype=float)[:dim]
         h = np.asarray(shape.size, dtype=float)[:dim] / 2.0
-        return _box_segments_distance(c, h, A, B, step)
+        return _box_segments_distance(c, h, A, B, step, length=length)
     return np.array([_shape_segment_distance(shape, a, b, dim, step) for a, b in zip(A, B, strict=True)])
 
 
@@ -232,13 +234,15 @@ def _unit_samples(n: int) -> Array:
     return np.linspace(0.0, 1.0, n)
 
 
-def _box_segments_distance(c: Array, h: Array, A: Array, B: Array, step: float, coarse: int = 17) -> Array:
+def _box_segments_distance(c: Array, h: Array, A: Array, B: Array, step: float, coarse: int = 17,
+                           length: float | None = None) -> Array:
     """Signed distances ``(N,)`` from the segments ``[A[i], B[i]]`` to the box of centre ``c`` and
     half-extents ``h``, sampled at most ``step`` apart near the minimum. The signed distance to a
     convex set is convex along a segment, so its minimum lies within one coarse interval of the
     best of ``coarse`` evenly spaced samples; only those two intervals are sampled finely."""
     D = B - A
-    L = float(np.sqrt((D * D).sum(axis=1).max())) if len(A) else 0.0
+    longest = float(np.sqrt((D * D).sum(axis=1).max())) if len(A) else 0.0
+    L = longest if length is None else float(length)
     n = max(2, int(np.ceil(L / step)) + 1)
     if n <= 2 * coarse:  # short segments: sample them whole
         T = _unit_samples(n)
@@ -493,16 +497,9 @@ class CollisionModel:
             if t.finger == finger and t.link is not None:
                 touch[min(int(t.link), n - 1)] = True
         od = od.reshape(N, n)
-        parts = [np.where(touch, np.maximum(0.0, od - fd.r_true + 1e-9), od - fd.r_infl)]  # (N, n) object
-        if fd.any_fixed:
-            r_all = np.tile(fd.r_infl, N)  # (N n,)
-            A2, skip = _trimmed_at_base(Af, Bf, fd.base, r_all)
-            dist = np.full(N * n, np.inf)
-            for fb in self.scene.fixed_bodies:
-                dist = np.minimum(dist, _shape_segments_distance(fb.shape, A2, Bf, d, self.sample_step))
-            parts.append(np.where(np.tile(fd.fixed_checked, N) & ~skip, dist - r_all, np.inf).reshape(N, n))
-        else:
-            parts.append(np.full((N, n), np.inf))
+        al = np.zeros(2 * n + len(fd.pairs)) if allowance is None else np.asarray(allowance, dtype=float)
+        obj = np.where(touch, np.maximum(0.0, od - fd.r_true + 1e-9), od - fd.r_infl) - al[:n]  # (N, n)
+        best = obj.min(axis=1)  # (N,) the minimum so far, as in _capsule_clearance_min
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):  # own non-adjacent pairs, then the links of the fingers checked against this one
             others = [k for k in range(len(self.hand.fingers))
@@ -513,11 +510,32 @@ class CollisionModel:
             p = len(i)
             pd = segment_segment_distances(S0[:, i].reshape(N * p, d), S1[:, i].reshape(N * p, d),
                                            S0[:, j].reshape(N * p, d), S1[:, j].reshape(N * p, d))
-            parts.append(pd.reshape(N, p) - fd.pair_radii)
-        terms = np.concatenate(parts, axis=1)  # (N, terms), laid out as clearance_terms
-        if allowance is not None:
-            terms = terms - allowance
-        return np.asarray(terms.min(axis=1))
+            best = np.minimum(best, (pd.reshape(N, p) - fd.pair_radii - al[2 * n:]).min(axis=1))
+        if fd.any_fixed:  # the fixed bodies, only for the links whose lower bound is below `best`
+            r_all = np.tile(fd.r_infl, N)  # (N n,)
+            A2, skip = _trimmed_at_base(Af, Bf, fd.base, r_all)
+            al_f = np.tile(al[n:2 * n], N)
+            checked = np.tile(fd.fixed_checked, N) & ~skip
+            E = Bf - A2
+            half = 0.5 * np.sqrt((E * E).sum(axis=1))
+            bounded = all(isinstance(fb.shape, Disk | Sphere | Box | Segment) for fb in self.scene.fixed_bodies)
+            need = checked
+            if bounded:  # 1-Lipschitz distances: a segment is at least dist(midpoint) - L/2 away
+                lb = np.full(N * n, np.inf)
+                for fb in self.scene.fixed_bodies:
+                    lb = np.minimum(lb, shape_signed_distances(fb.shape, 0.5 * (A2 + Bf), d) - half)
+                need = checked & (lb - r_all - al_f - 1e-9 < np.repeat(best, n))
+            if need.any():
+                # sampled as the whole block would be: the sample count from the longest link
+                length = float(2.0 * half.max())
+                dist = np.full(int(need.sum()), np.inf)
+                for fb in self.scene.fixed_bodies:
+                    dist = np.minimum(dist, _shape_segments_distance(fb.shape, A2[need], Bf[need], d, self.sample_step,
+                                                                     length))
+                fixed = np.full(N * n, np.inf)
+                fixed[need] = dist - r_all[need] - al_f[need]
+                best = np.minimum(best, fixed.reshape(N, n).min(axis=1))
+        return np.asarray(best)
 
     def _segment_arrays_many(self, finger: int, X: Array) -> tuple[Array, Array]:
         """:meth:`segment_arrays` of a capsule serial chain at the joints ``X`` ``(N, m)`` of the

@@ -287,3 +287,31 @@ def test_object_and_body_cones_are_in_world_coordinates() -> None:
     hand = HandKinematics.from_scene(scene)
     table = body_normal_cone(scene, hand, hand.resolve_body("table"), np.array([0.0, 0.2, 0.0]), 1e-4)
     assert table is not None and isinstance(table, NormalCone) and table.distance(EZ) == 0.0
+
+
+def test_cone_membership_agrees_with_the_distance_over_every_face() -> None:
+    """``NormalCone.contains`` (a ray or a plane of opposite rays first, then every face) answers
+    ``distance(u) <= tol`` on seeded cones: bare segments' perpendicular pairs (with and without
+    an end ray), random cones of 1-3 rays, near-plane directions."""
+    rng = np.random.default_rng(0)
+    seen = set()
+    for trial in range(600):
+        if trial % 3 == 0:
+            e = rng.normal(size=3)
+            e /= np.linalg.norm(e)
+            B = np.linalg.svd(e[None])[2][1:]  # (2, 3) perpendiculars of the segment
+            G = np.vstack([B[0], -B[0], B[1], -B[1]] + ([e] if trial % 2 else []))
+        else:
+            G = rng.normal(size=(int(rng.integers(1, 4)), 3))
+            G /= np.linalg.norm(G, axis=1)[:, None]
+        cone = NormalCone(G)
+        for _ in range(4):
+            u = rng.normal(size=3)
+            if trial % 3 == 0 and rng.random() < 0.5:
+                u -= 0.999 * (u @ e) * e  # close to the plane
+            u /= np.linalg.norm(u)
+            for tol in (0.01, 0.1, 0.5):
+                want = cone.distance(u) <= tol
+                assert cone.contains(u, tol) == want
+                seen.add(want)
+    assert seen == {True, False}

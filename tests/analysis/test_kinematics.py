@@ -303,3 +303,25 @@ def test_segment_distance(p: tuple[float, float], expected: float) -> None:
     a, b = np.array([0.0, 0.0]), np.array([1.0, 0.0])
     assert segment_distance(np.array(p), a, b) == pytest.approx(expected, abs=1e-12)
     assert segment_distance(np.array(p), a, a) == pytest.approx(np.hypot(*p), abs=1e-12)
+
+
+def test_frames_remembered_for_the_last_configuration_only() -> None:
+    """``SerialChain.frames`` keeps the last configuration's frames (read-only), and answers a new
+    configuration afresh: alternating configurations give each its own frames, equal to a chain
+    that never saw the other."""
+    chain = SerialChain("f", np.eye(3), np.zeros(3), np.array([[0, 0, 1.0], [0, 1.0, 0], [0, 1.0, 0]]),
+                        np.array([[0, 0, 0.0], [0, 0, 0.5], [0, 0, 0.5]]), np.array([0, 0, 0.3]), np.zeros(3),
+                        np.zeros(3))
+    fresh = SerialChain("g", chain.base_R, chain.base_p, chain.axes, chain.origins, chain.tip, chain.radii, chain.q0)
+    rng = np.random.default_rng(3)
+    qs = [rng.uniform(-2, 2, 3) for _ in range(3)]
+    for q in qs + qs[::-1] + qs:
+        Rs, ps = chain.frames(q)
+        Rf, pf = SerialChain("h", chain.base_R, chain.base_p, chain.axes, chain.origins, chain.tip, chain.radii,
+                             chain.q0).frames(q)
+        for a, b in zip(Rs + ps, Rf + pf, strict=True):
+            np.testing.assert_array_equal(a, b)
+        assert chain.frames(q.copy())[0][0] is Rs[0]  # the same configuration: remembered
+        with pytest.raises(ValueError):
+            Rs[0][0, 0] = 1.0  # read-only
+    assert fresh.frames(qs[0])[1][2] is not chain.frames(qs[0])[1][2]
