@@ -512,15 +512,17 @@ class CollisionModel:
                                            S0[:, j].reshape(N * p, d), S1[:, j].reshape(N * p, d))
             best = np.minimum(best, (pd.reshape(N, p) - fd.pair_radii - al[2 * n:]).min(axis=1))
         if fd.any_fixed:  # the fixed bodies, only for the links whose lower bound is below `best`
-            r_all = np.tile(fd.r_infl, N)  # (N n,)
+            tiles = self._cache.get(("tiles", finger, N))
+            if tiles is None:
+                tiles = self._cache[("tiles", finger, N)] = (np.tile(fd.r_infl, N), np.tile(fd.fixed_checked, N))
+            r_all, fixed_checked = tiles  # (N n,) each
             A2, skip = _trimmed_at_base(Af, Bf, fd.base, r_all)
             al_f = np.tile(al[n:2 * n], N)
-            checked = np.tile(fd.fixed_checked, N) & ~skip
+            checked = fixed_checked & ~skip
             E = Bf - A2
             half = 0.5 * np.sqrt((E * E).sum(axis=1))
-            bounded = all(isinstance(fb.shape, Disk | Sphere | Box | Segment) for fb in self.scene.fixed_bodies)
             need = checked
-            if bounded:  # 1-Lipschitz distances: a segment is at least dist(midpoint) - L/2 away
+            if self._fixed_bounded:  # 1-Lipschitz distances: a segment is at least dist(midpoint) - L/2 away
                 lb = np.full(N * n, np.inf)
                 for fb in self.scene.fixed_bodies:
                     lb = np.minimum(lb, shape_signed_distances(fb.shape, 0.5 * (A2 + Bf), d) - half)
@@ -536,6 +538,11 @@ class CollisionModel:
                 fixed[need] = dist - r_all[need] - al_f[need]
                 best = np.minimum(best, fixed.reshape(N, n).min(axis=1))
         return np.asarray(best)
+
+    @functools.cached_property
+    def _fixed_bounded(self) -> bool:
+        """Every fixed body has a signed distance for the lower bounds (not a mesh)."""
+        return all(isinstance(fb.shape, Disk | Sphere | Box | Segment) for fb in self.scene.fixed_bodies)
 
     def _segment_arrays_many(self, finger: int, X: Array) -> tuple[Array, Array]:
         """:meth:`segment_arrays` of a capsule serial chain at the joints ``X`` ``(N, m)`` of the
