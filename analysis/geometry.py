@@ -155,8 +155,9 @@ class NormalCone:
         The distance is the smallest residual over the faces (:meth:`distance`); the rays, and the
         planes spanned by two pairs of opposite rays (a bare segment's perpendiculars, whose cone is
         that plane: the subset of the two rays on the side of ``u`` fits it with non-negative
-        coefficients), bound the distance from above, so a residual to one of them within ``tol``
-        (less a rounding margin) answers yes without the enumeration of every subset."""
+        coefficients), and the half-space of such a plane with rays on one side of it (a segment's
+        end), bound the distance from above, so a residual to one of them within ``tol`` (less a
+        rounding margin) answers yes without the enumeration of every subset."""
         u = np.asarray(u, dtype=float)
         G = self.generators
         if G.shape[0]:
@@ -166,10 +167,16 @@ class NormalCone:
                 return True
             opposite = [(i, j) for i, j in itertools.combinations(range(G.shape[0]), 2)
                         if float(G[i] @ G[j]) < -1.0 + 1e-12]
-            for (i, _), (k, _) in itertools.combinations(opposite, 2):  # two lines: a plane
+            for (i, i2), (k, k2) in itertools.combinations(opposite, 2):  # two lines: a plane
                 B = np.linalg.qr(np.stack([G[i], G[k]], axis=1))[0]  # (d, 2) orthonormal basis
                 if float(np.linalg.norm(u - B @ (B.T @ u))) <= tol - 1e-12:
                     return True
+                if G.shape[1] == 3:  # the plane and rays all on one side of it: that half-space
+                    n = np.cross(B[:, 0], B[:, 1])  # (3,) unit normal of the plane
+                    side = np.delete(G, [i, i2, k, k2], axis=0) @ n
+                    one_side = len(side) and (np.all(side > 1e-12) or np.all(side < -1e-12))
+                    if one_side and max(0.0, -float(u @ n) * float(np.sign(side[0]))) <= tol - 1e-12:
+                        return True
         return self.distance(u) <= tol
 
 
