@@ -556,13 +556,17 @@ class CollisionModel:
         N = X.shape[0]
         A = np.empty((N, n, 3))
         B = np.empty((N, n, 3))
+        K = self._cache.get(("rotK", finger))
+        if K is None:  # (n, 3, 3) each: the joints' K and K @ K, stacked
+            K = self._cache[("rotK", finger)] = (np.array([k for k, _ in fd.rot_K]),
+                                                 np.array([k2 for _, k2 in fd.rot_K]))
+        S, C = np.sin(X[:, :n]), 1.0 - np.cos(X[:, :n])  # (N, n)
+        Rot = _EYE3 + S[:, :, None, None] * K[0] + C[:, :, None, None] * K[1]  # (N, n, 3, 3) joint rotations
         R = np.broadcast_to(chain.base_R, (N, 3, 3))
         p = np.broadcast_to(chain.base_p, (N, 3))
         for k in range(n):
             p = p + R @ chain.origins[k]
-            K, K2 = fd.rot_K[k]
-            s, c = np.sin(X[:, k]), 1.0 - np.cos(X[:, k])
-            R = R @ (_EYE3 + s[:, None, None] * K + c[:, None, None] * K2)
+            R = R @ Rot[:, k]
             end = chain.origins[k + 1] if k + 1 < n else chain.tip
             A[:, k], B[:, k] = p, p + R @ end
         return A[:, :, :d], B[:, :, :d]
