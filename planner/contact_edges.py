@@ -183,7 +183,7 @@ def validate_contact(nodes: GraphNodes, state: GraspState, new: GraspState, f: i
     if tp is None:
         nodes.reject("OMPL found no collision-free transfer to a new contact")
         return None
-    if nodes.held(new) is None:
+    if nodes.held(new) is None or not nodes.arrives(new):
         return None
     sl = hand.finger_slice(f)
     q_path = np.tile(state.q, (len(tp.waypoints), 1))

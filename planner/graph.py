@@ -64,7 +64,8 @@ class ContactStateGraph(GraphNodes):
         out: list[Successor] = []
         links = [] if self.goal.type in MOTION_GOALS else self.link_release_edges(state, self.goal.type in TIP_GOALS)
         for t, new in self.release_edges(state) + links + self.object_motion_edges(state):
-            out.append(Successor(self.add(new), t.cost, t))
+            if self.arrives(new):  # a validated node is entered only at its own configuration
+                out.append(Successor(self.add(new), t.cost, t))
         out.extend(self.contact_edges(state))
         return out
 

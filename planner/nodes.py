@@ -14,6 +14,8 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from analysis._types import Array
 from analysis.exceptions import SceneError
 from analysis.geometry import object_size
@@ -25,6 +27,9 @@ from planner.options import PlannerOptions
 from planner.state import AnalysisCache, GraspState, StateAnalysis, all_f
 from planner.timings import Timings
 from planner.transfer import TransferPath
+
+#: joints (rad) within which two configurations of one node are the same (a plan's steps chain)
+Q_MATCH = 1e-6
 
 
 @dataclass
@@ -58,6 +63,21 @@ class GraphNodes:
             if validated:
                 self.validated.add(k)
         return k
+
+    def arrives(self, state: GraspState) -> bool:
+        """Whether an edge that ends in ``state`` may enter its node: the node is new, not yet
+        validated, or validated with the same hand configuration (within :data:`Q_MATCH`). The node
+        key holds the contacts and the object pose, not the joints; a redundant finger touching at
+        the same point, or a free finger retreated elsewhere, gives another configuration of the
+        same node, and the next step starts from the configuration registered first: an edge that
+        ends elsewhere would make the plan's joint path jump between two steps."""
+        k = state.key()
+        if k not in self.validated:
+            return True
+        if float(np.max(np.abs(self.states[k].q - state.q), initial=0.0)) <= Q_MATCH:
+            return True
+        self.reject("the same grasp is already reached with another hand configuration")
+        return False
 
     def analysis(self, state: GraspState) -> StateAnalysis:
         """The (cached) closure analysis of a state."""

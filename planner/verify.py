@@ -26,6 +26,8 @@ contact point lies on its body and on the object) and:
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from analysis._types import Array
@@ -263,10 +265,23 @@ def _rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: s
     return out
 
 
+#: a step starts where the one before it ended, joints (rad or scene units) and object pose, within
+#: this (plan files round paths to 1e-10)
+CHAIN_TOL = 1e-6
+
+
 def verify_plan(scene: Scene, plan: Plan) -> list[str]:
-    """Problems found when re-checking every step of ``plan`` (empty: the plan passes)."""
+    """Problems found when re-checking every step of ``plan`` (empty: the plan passes): each step
+    (:func:`verify_step`), and that each step starts where the one before it ended (the hand's
+    joints and the object's pose within :data:`CHAIN_TOL`: no jump between two steps)."""
     hand = HandKinematics.from_scene(scene)
     out: list[str] = []
     for step in plan.steps:
         out.extend(verify_step(scene, hand, step))
+    for a, b in itertools.pairwise(plan.steps):
+        for name, end, start in (("joints", a.transition.q_path[-1], b.transition.q_path[0]),
+                                 ("object pose", a.transition.object_path[-1], b.transition.object_path[0])):
+            jump = float(np.max(np.abs(np.asarray(start, dtype=float) - np.asarray(end, dtype=float))))
+            if jump > CHAIN_TOL:
+                out.append(f"step {b.index}: starts {jump:.3g} away from where step {a.index} ended ({name})")
     return out

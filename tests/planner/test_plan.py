@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -226,3 +227,39 @@ def test_plan_from_json_names_the_bad_field(planar_scene: Scene, planar_plan, ca
     with pytest.raises(SceneError) as e:
         Plan.from_json(data, planar_scene)
     assert e.value.loc == loc, e.value
+
+
+def test_verify_finds_a_step_that_does_not_start_where_the_last_ended(planar_scene: Scene, planar_plan) -> None:  # type: ignore[no-untyped-def]
+    """The planar plan's steps chain (each starts at the joints and the object pose the one before
+    it ended at); moving the start of step 2 by 0.01 rad makes verify_plan name the jump."""
+    assert verify_plan(planar_scene, planar_plan) == []
+    s2 = planar_plan.steps[2]
+    q_path = s2.transition.q_path.copy()
+    q_path[0, 0] += 0.01
+    moved = replace(s2, transition=replace(s2.transition, q_path=q_path))
+    bad = replace(planar_plan, steps=(*planar_plan.steps[:2], moved, *planar_plan.steps[3:]))
+    problems = verify_plan(planar_scene, bad)
+    assert "step 2: starts 0.01 away from where step 1 ended (joints)" in problems
+
+
+def test_a_validated_grasp_is_entered_only_at_its_own_configuration(planar_scene: Scene) -> None:
+    """GraphNodes.arrives: a node (contacts and object pose) registered by a checked edge takes
+    further edges only when they end at its hand configuration; otherwise the plan would jump
+    between two steps (the palm plan did by 0.014 rad before)."""
+    from planner.nodes import Q_MATCH, GraphNodes
+    from planner.state import state_from_scene
+
+    hand = HandKinematics.from_scene(planar_scene)
+    nodes = GraphNodes(planar_scene, hand, Goal(type="active"))
+    st = state_from_scene(planar_scene, hand)
+    q = st.q.copy()
+    q[0] += 0.05  # the same contacts and pose, another configuration
+    other = st.with_contacts(st.contacts, q)
+    assert other.key() == st.key()
+    assert nodes.arrives(other)  # nothing registered yet
+    nodes.add(other, validated=False)
+    assert nodes.arrives(st)  # registered, not validated: may still be replaced
+    nodes.add(st)
+    assert nodes.arrives(st.with_contacts(st.contacts, st.q + 0.5 * Q_MATCH))
+    assert not nodes.arrives(other)
+    assert nodes.rejections["the same grasp is already reached with another hand configuration"] == 1
