@@ -492,21 +492,31 @@ class CollisionModel:
         pos = np.asarray(position, dtype=float)[:d]
         Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         od = _shape_segments_distance(self.scene.object.shape, (Af - pos) @ R, (Bf - pos) @ R, d, self.sample_step)
+        od = od.reshape(N, n)
+        if allowance is None:
+            al = self._cache.get(("zeros", finger))
+            if al is None:
+                al = self._cache[("zeros", finger)] = np.zeros(2 * n + len(fd.pairs))
+        else:
+            al = np.asarray(allowance, dtype=float)
         touch = np.zeros(n, dtype=bool)
         for t in touching:
             if t.finger == finger and t.link is not None:
                 touch[min(int(t.link), n - 1)] = True
-        od = od.reshape(N, n)
-        al = np.zeros(2 * n + len(fd.pairs)) if allowance is None else np.asarray(allowance, dtype=float)
-        obj = np.where(touch, np.maximum(0.0, od - fd.r_true + 1e-9), od - fd.r_infl) - al[:n]  # (N, n)
+        if touch.any():
+            obj = np.where(touch, np.maximum(0.0, od - fd.r_true + 1e-9), od - fd.r_infl) - al[:n]  # (N, n)
+        else:
+            obj = od - fd.r_infl - al[:n]
         best = obj.min(axis=1)  # (N,) the minimum so far, as in _capsule_clearance_min
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):  # own non-adjacent pairs, then the links of the fingers checked against this one
             others = [k for k in range(len(self.hand.fingers))
                       if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
-            segs = [self._segments_cached(k, q) for k in others]
-            S0 = np.concatenate([A, *(np.broadcast_to(sg[0], (N, *sg[0].shape)) for sg in segs)], axis=1)
-            S1 = np.concatenate([B, *(np.broadcast_to(sg[1], (N, *sg[1].shape)) for sg in segs)], axis=1)
+            S0, S1 = A, B
+            if others:
+                segs = [self._segments_cached(k, q) for k in others]
+                S0 = np.concatenate([A, *(np.broadcast_to(sg[0], (N, *sg[0].shape)) for sg in segs)], axis=1)
+                S1 = np.concatenate([B, *(np.broadcast_to(sg[1], (N, *sg[1].shape)) for sg in segs)], axis=1)
             p = len(i)
             pd = segment_segment_distances(S0[:, i].reshape(N * p, d), S1[:, i].reshape(N * p, d),
                                            S0[:, j].reshape(N * p, d), S1[:, j].reshape(N * p, d))
@@ -523,9 +533,11 @@ class CollisionModel:
             half = 0.5 * np.sqrt((E * E).sum(axis=1))
             need = checked
             if self._fixed_bounded:  # 1-Lipschitz distances: a segment is at least dist(midpoint) - L/2 away
-                lb = np.full(N * n, np.inf)
-                for fb in self.scene.fixed_bodies:
-                    lb = np.minimum(lb, shape_signed_distances(fb.shape, 0.5 * (A2 + Bf), d) - half)
+                C = 0.5 * (A2 + Bf)
+                bodies = self.scene.fixed_bodies
+                lb = shape_signed_distances(bodies[0].shape, C, d) - half
+                for fb in bodies[1:]:
+                    lb = np.minimum(lb, shape_signed_distances(fb.shape, C, d) - half)
                 need = checked & (lb - r_all - al_f - 1e-9 < np.repeat(best, n))
             if need.any():
                 # sampled as the whole block would be: the sample count from the longest link
