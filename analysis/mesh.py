@@ -27,8 +27,8 @@ MESH_SUFFIXES = (".stl", ".obj")
 #: Facets whose unit normals differ by less than this are one face (a quad as two triangles).
 _SAME_NORMAL = 1e-9
 
-__all__ = ["MESH_SUFFIXES", "ConvexHull", "convex_hull", "hull_of", "load_mesh", "point_signed_distance",
-           "resolve_mesh_path", "shape_cone"]
+__all__ = ["MESH_SUFFIXES", "ConvexHull", "Primitive", "convex_hull", "hull_of", "load_mesh",
+           "point_signed_distance", "primitive_of", "resolve_mesh_path", "shape_cone"]
 
 
 @dataclass(frozen=True)
@@ -165,6 +165,35 @@ def point_signed_distance(geometry: Any, R: Array, t: Array, x: Array) -> float:
     if isinstance(geometry, coal.Capsule):
         z = float(np.clip(local[2], -geometry.halfLength, geometry.halfLength))
         return float(np.linalg.norm(local - np.array([0.0, 0.0, z])) - geometry.radius)
+    raise SceneError((), f"collision shape {type(geometry).__name__} is not supported "
+                     "(meshes, boxes, spheres, cylinders and capsules are)")
+
+
+@dataclass(frozen=True)
+class Primitive:
+    """A collision shape in plain numbers, for engines other than coal (the MuJoCo model,
+    :mod:`sim.mjcf`): ``kind`` ``"sphere"`` (``size = (r,)``), ``"box"`` (half sides), ``"cylinder"``
+    and ``"capsule"`` (``(r, half length)``, along the shape's own z), or ``"hull"`` (a mesh: the
+    ``vertices`` ``(k, 3)`` of its convex hull, :func:`hull_of`), in the shape's own frame."""
+
+    kind: str
+    size: tuple[float, ...]
+    vertices: Array | None = None
+
+
+def primitive_of(geometry: Any) -> Primitive:
+    """The :class:`Primitive` of a coal shape (a URDF collision object); SceneError for a shape
+    the detector does not take (the same shapes as :func:`point_signed_distance`)."""
+    if isinstance(geometry, coal.Sphere):
+        return Primitive("sphere", (float(geometry.radius),))
+    if isinstance(geometry, coal.Box):
+        return Primitive("box", tuple(float(h) for h in np.asarray(geometry.halfSide, dtype=float)))
+    if isinstance(geometry, coal.Cylinder):
+        return Primitive("cylinder", (float(geometry.radius), float(geometry.halfLength)))
+    if isinstance(geometry, coal.Capsule):
+        return Primitive("capsule", (float(geometry.radius), float(geometry.halfLength)))
+    if _is_mesh(geometry):
+        return Primitive("hull", (), hull_of(geometry).vertices)
     raise SceneError((), f"collision shape {type(geometry).__name__} is not supported "
                      "(meshes, boxes, spheres, cylinders and capsules are)")
 

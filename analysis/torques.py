@@ -26,7 +26,7 @@ import numpy as np
 from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
 from analysis.dafc import DAFCOracle, DirectionTest
-from analysis.exceptions import EmptyTorqueSet, NotInDAFC
+from analysis.exceptions import EmptyTorqueSet, NotInDAFC, SolverError
 from analysis.friction import FrictionSet, KineticFriction
 from analysis.linalg import null_space, rank
 from analysis.motion import MotionSpace
@@ -278,7 +278,13 @@ def _over_limits(tc: TorqueConditions, target: float, w_ex: Array) -> EmptyTorqu
     if tc.tau_max is None:
         return None
     for work in (target, 1e-6 * (1.0 + float(np.linalg.norm(w_ex)))):
-        excess = tc.limit_excess(work)
+        try:
+            excess = tc.limit_excess(work)
+        except SolverError:
+            # the diagnosis's own LP failed (HiGHS 'Solve error' on a set of zero work, seen on
+            # Baxter's lift with sliding forearms): the set stays empty, undiagnosed, so that
+            # torque_set still tries the DAFC certificate motion
+            return None
         if excess:
             return EmptyTorqueSet(
                 "the torque set (32) is empty within the joint torque limits for this direction; moving "

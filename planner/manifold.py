@@ -4,7 +4,8 @@ In the ambient coordinates ``x = [q (M); s (D)]`` of OMPL's constrained planning
 configuration, ``s`` the object displacement from the state's pose, :meth:`analysis.pose.Pose.displaced`),
 :class:`ContactManifold` is ``F(x) = 0``: every sticking contact's body point stays on its object
 point (eq. 7) and every sliding contact keeps touching (eq. 5, normal component only: a disk or
-sphere on any body, or an object point of any other object on a fixed body's surface). Its
+sphere on any body, an object point of any other object on a fixed body's surface, or a capsule
+link lying along a face of a box or polygon, its axis point the link's radius off the face). Its
 Jacobian at ``s = 0`` is ``A_c`` (eq. 19), so its tangent space there is the motion space.
 :func:`project_manifold` projects an ambient point onto it (minimum-norm Newton steps, as OMPL's
 ``ProjectedStateSpace`` does); :func:`pose_displacement` gives the ``s`` of a pose vector.
@@ -18,11 +19,12 @@ import numpy as np
 
 from analysis._types import Array
 from analysis.exceptions import SceneError
-from analysis.geometry import shape_signed_distance
+from analysis.geometry import link_shapes, shape_normal_cone, shape_signed_distance
 from analysis.kinematics import BodyRef, HandKinematics
+from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
 from analysis.rotations import skew
-from analysis.scene import Disk, Scene, Sphere
+from analysis.scene import Box, Disk, Polygon, Scene, Sphere
 from planner.state import GraspState
 
 _EYE3 = np.eye(3)
@@ -51,7 +53,14 @@ class ContactManifold:
     distance of its centre from the body minus the radius (the contact point moves on both), on
     any other object a contact on a fixed body only, whose object point ``c_i`` (a box corner on a
     table) stays on the body's surface, ``sd_body(p_o + dp + R(s) c_i) = 0``, with Jacobian
-    ``u^T [I, -[R c_i]x J_l(w)]`` (``u`` the body's outward unit normal there). The Jacobian is ``[J_c, -G^T]`` in
+    ``u^T [I, -[R c_i]x J_l(w)]`` (``u`` the body's outward unit normal there), or a capsule link
+    sliding on a flat face of a box or polygon object (a forearm along a box's side, S at a link):
+    the link's axis point ``a`` over the contact stays the link's radius ``rho`` off the face's
+    plane, ``(R(s) u_o) . (a(q) - p_o - dp) - h - rho = 0`` (``u_o . x = h`` the face in the
+    object frame), Jacobian ``[u^T J_a, -u^T, ((u x (a - p)) J_l(w))^T]``; a link's two such rows
+    (its line contact's ends) keep it parallel to the face. A contact at the joint with another
+    link of its finger that sticks there (a forearm's end at the elbow, where the elbow's line
+    ends) has no row (:meth:`_implied_at_joint`). The Jacobian is ``[J_c, -G^T]`` in
     these coordinates, so ``F'(x) [dq; ds] = 0`` at ``s = 0`` is ``A_c [dq; dr] = 0`` (eq. 7, 19).
 
     With ``direction`` (a unit ``dr`` ``(D,)``, the analysed DAFC direction of an object motion)
@@ -115,6 +124,11 @@ class ContactManifold:
         #: point ``(d,)`` (a vertex, edge or face corner of any other object on a fixed body: that point
         #: stays on the body's surface while it slides along it)
         self.sliding_points: list[Array | None] = []
+        #: per sliding contact: ``None``, or for a link sliding on a face of a box or polygon (a
+        #: forearm lying on a box's side) ``(a_b, u_o, h)``: the link's axis point under the contact
+        #: (link frame ``(3,)``), the face's outward unit normal and its offset ``u_o . x = h``
+        #: (object frame): the axis point stays the link's radius off the face's plane
+        self.sliding_faces: list[tuple[Array, Array, float] | None] = []
         if sliding:
             if scene is None:
                 raise SceneError(("object", "shape"), "sliding contacts need the scene (its shapes)")
@@ -126,15 +140,15 @@ class ContactManifold:
             c = state.contacts[i]
             ref = hand.resolve_body(c.body)
             assert ref is not None
+            face = None
             if isinstance(self.scene.object.shape, Disk | Sphere):
                 self.sliding_points.append(None)
             elif ref.finger is None:
                 self.sliding_points.append(np.asarray(c.point_object, dtype=float))
             else:
-                raise SceneError(("object", "shape"),
-                                 f"a sliding contact of a link (contact {i}, {c.body}) is followed for disk and "
-                                 f"sphere objects only (the object is a {self.scene.object.shape.type}); on other "
-                                 "objects only contacts on fixed bodies slide")
+                face = self._link_on_face(i, ref, state)
+                self.sliding_points.append(None)
+            self.sliding_faces.append(face)
             self.sliding.append(ref)
         #: ``B`` ``(D, k)``: an orthonormal basis of the complement of ``direction`` in the motion
         #: space (``k = a~ - 1``); the rows ``B^T s = 0`` keep the object on the analysed direction
@@ -151,10 +165,83 @@ class ContactManifold:
             self.complement = Uc[:, sv > 1e-9]  # (D, k)
         self._roll0 = self.dim * len(self.items)  # first rolling row
         self._slide0 = self._roll0 + 2 * len(self.rolls)  # first sliding row
-        self._base = self._slide0 + len(self.sliding)
+        #: the row of each sliding contact (none for a link's contact at the joint with a link that
+        #: sticks to the same face, :meth:`_implied_at_joint`)
+        self._row_of: dict[int, int] = {}
+        for k in range(len(self.sliding)):
+            if not self._implied_at_joint(k, sticking):
+                self._row_of[k] = len(self._row_of)
+        self._base = self._slide0 + len(self._row_of)
         #: rows of the contacts (without the direction's)
         self.contact_rows = self._base
         self.rows = self._base + self.complement.shape[1]
+
+    def _link_on_face(self, i: int, ref: BodyRef, state: GraspState) -> tuple[Array, Array, float]:
+        """``(a_b, u_o, h)`` of :attr:`sliding_faces` for contact ``i``, a capsule link on a flat face of
+        a box or polygon object; SceneError naming what is not supported (an edge or a vertex of
+        the object, a curved or mesh object, a link of URDF collision shapes)."""
+        c = state.contacts[i]
+        shape = self.scene.object.shape
+        where = ("contacts", i)
+        if not isinstance(shape, Box | Polygon):
+            raise SceneError(where, f"a sliding contact of a link ({c.body}) is followed on disks, spheres and the "
+                             f"faces of boxes and polygons (the object is a {shape.type})")
+        if link_shapes(self.hand, ref, state.q) is not None:
+            raise SceneError(where, f"a sliding contact of a link ({c.body}) is followed for capsule links only "
+                             "(this link has its URDF collision shapes)")
+        po = np.asarray(c.point_object, dtype=float)
+        u_o = -np.asarray(c.normal_object, dtype=float)  # (d,) outward, object frame
+        cone = shape_normal_cone(shape, po, self.dim, GEOMETRY_TOL)
+        # the contact's normal is a face's normal there (the end of a line contact may lie on the
+        # face's edge: a forearm reaching past the box's side), not a direction inside an edge's cone
+        if cone is None or not any(float(g @ u_o) > 1 - 1e-9 for g in cone.generators):
+            raise SceneError(where, f"a sliding contact of a link ({c.body}) is followed on a face of the object "
+                             "(its normal is no face's normal: it touches an edge or a vertex)")
+        x = state.world_point(i)  # (d,)
+        a, b = self.hand.body_segment(ref, state.q)
+        a, e = a[: self.dim], b[: self.dim] - a[: self.dim]
+        t = float(np.clip((x - a) @ e / max(float(e @ e), 1e-300), 0.0, 1.0))
+        foot = a + t * e  # (d,) the axis point under the contact
+        return self.hand.to_local(ref, foot, state.q), u_o, float(u_o @ po)
+
+    def _implied_at_joint(self, k: int, sticking: Sequence[int]) -> bool:
+        """Whether sliding contact ``k`` (a link on a face) sits at the joint with another link of its
+        finger whose sticking contact there has the same axis point: a forearm's contact at the
+        elbow joint, where the elbow's line contact ends. The joint centre is then glued to the
+        object through the other link, so the forearm's axis stays on the face there; its own row
+        would be redundant to first order and not to second (the sticking link may turn about its
+        contact line, which moves the joint centre off the face by ``rho (1 - cos)``; the capsule's
+        own surface forbids that turn, which glued points do not see), a cusp no projection can
+        follow. The contact keeps sliding (it turns about the joint with the other link)."""
+        face = self.sliding_faces[k]
+        if face is None:
+            return False
+        ref = self.sliding[k]
+        a = self.hand.point_position(ref, face[0], self.state.q)
+        for i in sticking:
+            c = self.state.contacts[i]
+            other = self.hand.resolve_body(c.body)
+            if other is None or other.finger != ref.finger or other.link == ref.link:
+                continue
+            p0, p1 = self.hand.body_segment(other, self.state.q)
+            p0, e = p0[: self.dim], p1[: self.dim] - p0[: self.dim]
+            x = self.state.world_point(i)
+            t = float(np.clip((x - p0) @ e / max(float(e @ e), 1e-300), 0.0, 1.0))
+            if float(np.linalg.norm(p0 + t * e - a)) <= GEOMETRY_TOL:
+                return True
+        return False
+
+    def _face_gap(self, k: int, q: Array, pose: Pose) -> tuple[float, Array, Array]:
+        """Sliding contact ``k`` of a link on a face: the gap ``u . (a - p_o) - h - rho`` (``u`` the
+        face's outward normal in the world, ``a`` the link's axis point), ``u`` ``(d,)`` and ``a``
+        ``(d,)``."""
+        face = self.sliding_faces[k]
+        assert face is not None
+        a_b, u_o, h = face
+        ref = self.sliding[k]
+        a = self.hand.point_position(ref, a_b, q)
+        u = pose.R_d @ u_o
+        return float(u @ (a - pose.position)) - h - self.hand.body_radius(ref), u, a
 
     def body_distance(self, ref: BodyRef, c: Array, q: Array) -> tuple[float, Array, Array]:
         """Distance of the object centre ``c`` ``(d,)`` from the surface of the body ``ref`` at ``q``,
@@ -282,6 +369,14 @@ class ContactManifold:
         (object frame ``(d,)``) where the body touches the disk or sphere."""
         q, s = x[: self.M], x[self.M:]
         pose = self.pose(s)
+        if self.sliding_faces[k] is not None:  # a link on a face: under its axis point, within the face
+            gap, u, a = self._face_gap(k, q, pose)
+            # the foot of the axis point on the face's plane (a - rho u where the gap row holds; a
+            # contact without a row, at a joint, lands on the face too)
+            y = self._within_face(k, a - (gap + self.hand.body_radius(self.sliding[k])) * u, q, pose)
+            face = self.sliding_faces[k]
+            assert face is not None
+            return y, pose.to_local(y), -face[1]
         po = self.sliding_points[k]
         if po is not None:  # an object point on a fixed body: it stays, the body's point moves
             y = pose.to_world(po)
@@ -290,6 +385,50 @@ class ContactManifold:
         _, u, _ = self.body_distance(self.sliding[k], pose.position, q)
         y = pose.position - self.radius * u  # the touching point, on both surfaces when the gap is zero
         return y, pose.to_local(y), pose.R_d.T @ u
+
+    def _within_face(self, k: int, y: Array, q: Array, pose: Pose) -> Array:
+        """The point ``y`` ``(d,)`` (world, on the face's plane, under the link's axis) moved along the
+        axis' projection onto the face until it lies on the face (a forearm reaching past the box's
+        edge touches it up to the edge): the nearest point of that line inside the object's face."""
+        ref = self.sliding[k]
+        shape = self.scene.object.shape
+        a, b = self.hand.body_segment(ref, q)
+        e = pose.R_d.T @ (b[: self.dim] - a[: self.dim])  # (d,) the axis, object frame
+        face = self.sliding_faces[k]
+        assert face is not None
+        u_o = face[1]
+        e = e - (e @ u_o) * u_o  # projected onto the face
+        y_o = pose.to_local(y)
+        if float(np.linalg.norm(e)) <= 1e-12:
+            return y
+        e = e / np.linalg.norm(e)
+        # the face: the object's points on its plane, inside every other supporting half-space
+        if isinstance(shape, Box):
+            c = np.zeros(self.dim) if shape.position is None else np.asarray(shape.position, dtype=float)
+            half = np.asarray(shape.size, dtype=float) / 2.0
+            normals = np.vstack([np.eye(self.dim), -np.eye(self.dim)])  # (2d, d)
+            offsets = np.concatenate([c + half, -(c - half)])  # (2d,)
+        else:
+            assert isinstance(shape, Polygon)
+            V = np.asarray(shape.vertices, dtype=float)
+            E = np.roll(V, -1, axis=0) - V
+            normals = np.column_stack([E[:, 1], -E[:, 0]]) / np.linalg.norm(E, axis=1)[:, None]
+            offsets = np.sum(normals * V, axis=1)
+        lo, hi = -np.inf, np.inf  # the parameters t with y_o + t e inside (Liang-Barsky)
+        for nrm, off in zip(normals, offsets, strict=True):
+            if abs(float(nrm @ u_o)) > 1 - 1e-9:
+                continue  # the face's own plane and the opposite face
+            rate, slack = float(nrm @ e), float(off - nrm @ y_o)
+            if abs(rate) <= 1e-12:
+                continue
+            if rate > 0:
+                hi = min(hi, slack / rate)
+            else:
+                lo = max(lo, slack / rate)
+        if lo > hi:
+            return y
+        t = min(max(0.0, lo), hi)
+        return pose.to_world(y_o + t * e)
 
     def pose(self, s: Array) -> Pose:
         """The object pose at displacement ``s`` ``(D,)`` from the state's pose."""
@@ -307,11 +446,17 @@ class ContactManifold:
         if self.rolls:
             out[self._roll0: self._slide0] = self._rolling_rows(x)
         for k, ref in enumerate(self.sliding):  # S-points: the gap to the disk/sphere is zero
+            if k not in self._row_of:
+                continue
+            row = self._slide0 + self._row_of[k]
+            if self.sliding_faces[k] is not None:  # a link on a face: its axis point rho off the plane
+                out[row] = self._face_gap(k, q, pose)[0]
+                continue
             c = self.sliding_points[k]
             if c is not None:  # an object point on a fixed body: its distance from the surface is zero
-                out[self._slide0 + k] = self.body_distance(ref, pose.to_world(c), q)[0]
+                out[row] = self.body_distance(ref, pose.to_world(c), q)[0]
                 continue
-            out[self._slide0 + k] = self.body_distance(ref, pose.position, q)[0] - self.radius
+            out[row] = self.body_distance(ref, pose.position, q)[0] - self.radius
         out[self._base:] = self.complement.T @ s  # on the line of the analysed direction
         return out
 
@@ -335,7 +480,21 @@ class ContactManifold:
         if self.rolls:
             J[self._roll0: self._slide0] = self._rolling_jacobian(x)
         for k, ref in enumerate(self.sliding):  # d gap = u^T (d p_o - J(y) dq); the centre is p_o
-            row = self._slide0 + k
+            if k not in self._row_of:
+                continue
+            row = self._slide0 + self._row_of[k]
+            if self.sliding_faces[k] is not None:
+                # gap = (R u_o) . (a(q) - p) - h - rho: d gap = u^T J(a) dq - u^T dp + (u x (a - p)) . dphi,
+                # dphi = J_l(w) dw the world rotation (2-D: perp(u) . (a - p) dtheta)
+                _, u, a = self._face_gap(k, q, pose)
+                J[row, : self.M] = u @ self.hand.point_jacobian(ref, a, q)
+                J[row, self.M: self.M + d] = -u
+                arm = a - pose.position  # (d,)
+                if d == 2:
+                    J[row, self.M + 2] = -u[1] * arm[0] + u[0] * arm[1]
+                else:
+                    J[row, self.M + 3:] = (skew(u) @ arm) @ _left_jacobian_so3(s[3:])
+                continue
             c = self.sliding_points[k]
             if c is not None:  # d gap = u^T d x_o, x_o = p_o + dp + R(s) c (the body is fixed)
                 _, u, _ = self.body_distance(ref, pose.to_world(c), q)
@@ -354,18 +513,38 @@ class ContactManifold:
         return J
 
 
-def project_manifold(man: ContactManifold, x: Array, tolerance: float = 1e-11, iters: int = 50) -> tuple[Array, float]:
+#: singular values of ``F'`` below this fraction of the largest are taken as zero by the Newton
+#: steps of :func:`project_manifold`: redundant rows (the two glued points of a line contact, whose
+#: rows along the line repeat each other) leave singular values of round-off size (1e-14 once a
+#: motion has moved the points by its own round-off), whose inverses would send a step far along
+#: the manifold instead of onto it (LAPACK's default cut-off, 20 eps, keeps them)
+PROJECTION_RCOND = 1e-10
+
+
+def project_manifold(man: ContactManifold, x: Array, tolerance: float = 1e-11, iters: int = 50,
+                     progress: tuple[Array, float] | None = None) -> tuple[Array, float]:
     """Newton projection of ``x`` ``(M + D,)`` onto ``F(x) = 0`` with minimum-norm steps (the
     pseudo-inverse of ``F'``, as OMPL's ``ProjectedStateSpace`` projects); returns the point and
-    ``|F|`` there."""
+    ``|F|`` there. With ``progress = (u, t)`` (``u`` ``(D,)`` unit) the object is also held at
+    ``u . s = t``: its progress along the direction stays where the step put it, and the hand
+    takes up the correction."""
     x = np.array(x, dtype=float)
     res = 0.0
+    M = man.M
     for _ in range(iters):
         F = man.function(x)
         res = float(np.linalg.norm(F))
-        if res <= tolerance:
+        if progress is None:
+            if res <= tolerance:
+                break
+            x = x - np.linalg.lstsq(man.jacobian(x), F, rcond=PROJECTION_RCOND)[0]
+            continue
+        u, t = progress
+        gap = float(u @ x[M:]) - t
+        if res <= tolerance and abs(gap) <= tolerance:
             break
-        x = x - np.linalg.lstsq(man.jacobian(x), F, rcond=None)[0]
+        J = np.vstack([man.jacobian(x), np.concatenate([np.zeros(M), u])[None, :]])  # (rows + 1, M + D)
+        x = x - np.linalg.lstsq(J, np.append(F, gap), rcond=PROJECTION_RCOND)[0]
     return x, res
 
 

@@ -4,7 +4,8 @@ With the contacts of a set ``S_D`` in state D (by default the contacts on fixed 
 lets go; towards a goal pose also the fixed-body contacts the straight motion to the goal lifts
 off, when that is some of them only: a box tipped about an edge, :func:`_goal_lifted_contacts`),
 possibly the fixed-body contacts sliding (S: a disk or sphere on the palm, a box's
-corners along the table) and the others F, the
+corners along the table; with ``PlannerOptions.link_sliding`` also the contacts of a whole arm's
+distal link along the object's faces) and the others F, the
 combination is feasible (18 and 22), the direction is a DAFC member, and the torque set T (32) is
 not empty; its recommended torque and the motion ``dzeta_c`` chosen by (31) move the object until
 the D-contacts have separated by ``clearance`` (towards a goal pose: at most ``motion_step``).
@@ -13,6 +14,8 @@ contacts on a link's side rolling, :func:`~planner.object_motion.motion_manifold
 (:func:`~planner.object_motion.integrate_object_motion`) and then planned by OMPL's constrained
 planning (:func:`~planner.object_motion.plan_object_motion`); the state after it has the sliding
 and the rolling contacts where the motion left them (new points on the body and the object).
+Grasps with line contacts (a link touching with two or more points of one normal, a forearm lying
+along a box's side) and motions with sliding links move at most ``motion_step`` at a time.
 """
 
 from __future__ import annotations
@@ -23,8 +26,9 @@ from typing import Any
 import numpy as np
 
 from analysis._types import Array
-from analysis.exceptions import CTPError
+from analysis.exceptions import CTPError, SceneError
 from analysis.pose import Pose
+from analysis.scene import Box, Polygon
 from analysis.torques import torque_set
 from planner.goals import pose_goal_remaining
 from planner.manifold import ContactManifold
@@ -69,6 +73,14 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
         # the contacts on fixed bodies slide (a disk or sphere rolling its contact point along, any
         # other object keeping its corners on the body's surface: ContactManifold), the fingers stick
         plans.append(((), fixed))
+    if goal.type == "pose" and options.link_sliding:
+        # a whole arm lying on the object's faces with several links (line contacts) cannot turn them
+        # on the faces: the object follows the arms (a~ shrinks to a swing about the shoulders); the
+        # contacts of one link of every such arm slide along their faces instead (S at links)
+        for sset in _link_slide_sets(nodes, state):
+            for dset in [d for d in subsets if d] or [()]:
+                if not set(dset) & set(sset):
+                    plans.append((dset, sset))
     for dset, sset in plans:
         comb = _letters(state, dset, sset)
         best = None
@@ -111,6 +123,17 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
             dist = min(float(np.linalg.norm(pose_goal_remaining(goal, state))), options.motion_step * size)
         else:
             dist = options.motion_step * size
+        if _line_contacts(nodes, state) or any(nodes.hand.finger_of(state.contacts[i].body) is not None
+                                               for i in sset):
+            # links lying along the object (line contacts) or sliding on it: the torque of T holds
+            # for the start of the motion (first order), and the object motions such grasps allow
+            # are curved (two arms holding a box with two links each swing it about their
+            # shoulders), so the object leaves the torque's direction faster; such motions are
+            # motion_step long, each re-analysed (Baxter's swing: one motion of 8.6 cm replays 8 %
+            # off in MuJoCo, motions of 1 cm 2.7 %; under one torque the forearms' slide lifts the
+            # elbow joints off the box after 3 cm); D-contacts then separate by less than the
+            # clearance
+            dist = min(dist, options.motion_step * size)
         keep = [i for i in range(L) if i not in dset and i not in sset]
         with nodes.timings.measure("motion"):
             straight = integrate_object_motion(nodes.model, state, ts.direction, ts.dq, keep, list(dset), dist,
@@ -175,6 +198,53 @@ def _torque_set(nodes: GraphNodes, p: Any, grasp: Any, oracle: Any, dr: Array) -
         except CTPError:
             continue
     return None
+
+
+def _line_contacts(nodes: GraphNodes, state: GraspState) -> bool:
+    """Whether a finger link touches the object with two or more contacts of one normal (a line
+    contact: the detector's end points of a link lying along a face)."""
+    seen: dict[tuple[str, tuple[float, ...]], int] = {}
+    for c in state.contacts:
+        if nodes.hand.finger_of(c.body) is None:
+            continue
+        key = (c.body, tuple(np.round(np.asarray(c.normal_object, dtype=float), 6)))
+        seen[key] = seen.get(key, 0) + 1
+    return any(n >= 2 for n in seen.values())
+
+
+def _link_slide_sets(nodes: GraphNodes, state: GraspState) -> list[tuple[int, ...]]:
+    """Sets of link contacts that slide on the object's faces in an object motion towards a pose
+    (:class:`~planner.manifold.ContactManifold` follows a capsule link on a face of a box or
+    polygon): for the fingers that touch the object with two or more links, the contacts of the
+    link farthest from the root of each (a forearm; the link nearer the root, an elbow, keeps its
+    contacts and carries the arm's other links). Empty for other objects, and where a finger
+    touches with one link only.
+
+    Only the distal links slide: on Baxter's hug (examples/baxter_hug_box_lines.json) the lift
+    with the forearms sliding (FFSSFFSSDDDD) replays in MuJoCo as analysed (direction cosine 0.996
+    under its torque from T, 32; the forearms' far ends slide, everything else sticks), while the
+    same lift with the elbows sliding and the forearms sticking (SSFFSSFFDDDD), also feasible to
+    the analysis and cheaper to the search, does not: under its torque MuJoCo lifts the arms off
+    the box at the elbow joints and slides the forearms' far ends (cosine 0.955, the replay 200 %
+    off)."""
+    shape = nodes.scene.object.shape
+    if not isinstance(shape, Box | Polygon):
+        return []
+    by_finger: dict[int, dict[int, list[int]]] = {}
+    for i, c in enumerate(state.contacts):
+        ref = nodes.hand.resolve_body(c.body)
+        if ref is None or ref.finger is None or ref.link is None:
+            continue
+        by_finger.setdefault(ref.finger, {}).setdefault(int(ref.link), []).append(i)
+    arms = [links for links in by_finger.values() if len(links) >= 2]
+    if not arms:
+        return []
+    sset = tuple(sorted(i for links in arms for i in links[max(links)]))
+    try:
+        ContactManifold(nodes.hand, state, [], sset, nodes.scene)
+    except SceneError:
+        return []  # a link of URDF shapes, an edge contact: not followed
+    return [sset]
 
 
 def _slid_contacts(nodes: GraphNodes, state: GraspState, sset: tuple[int, ...],

@@ -15,7 +15,11 @@ torque does not), ``RRTConnect`` whose motions are manifold geodesics checked fo
 collisions (the links against the object, the fixed bodies and each other, and the object against
 the fixed bodies), and the solution densified on the manifold until no joint moves more than
 :data:`~planner.collision.DENSE_STEP` between checked states, each of which is checked again, and
-every segment of the object path within :data:`MIN_DIRECTION_COSINE` of ``dr``.
+every segment of the object path within :data:`MIN_DIRECTION_COSINE` of ``dr``. Where a step of the
+integration or a densified state slides along the manifold instead of onto it (the redundant rows
+of line contacts), it is projected again with the object's progress along ``dr`` held; where
+OMPL's path fails those checks, the integrated path is densified and checked the same way
+(``ompl_planner_states = 0`` says so).
 
 For a 2-D disk object (:func:`rolls_on_links`) the sticking contacts on the side of a finger link
 roll (:class:`~planner.manifold.ContactManifold` with ``rolling=True``: the contact point moves by
@@ -210,7 +214,16 @@ def integrate_object_motion(
     worst_res = 0.0
     valid = _MotionCheck.of(model, state, (*sticking, *separating, *sliding))
     for _ in range(steps):
-        x, res = project_manifold(man, x + h * np.concatenate([dq, dr]))
+        x_try = x + h * np.concatenate([dq, dr])
+        x, res = project_manifold(man, x_try)
+        if man.direction is not None:
+            # the object advances h along dr per step: where the projection took it much farther or
+            # less far (dq, the hand's motion at the start, no longer fits the curved set of object
+            # motions the contacts allow: two arms each holding the box with a sticking and a
+            # sliding link), the step is projected again with the object's progress held
+            target = float(man.direction @ x_try[hand.M:])
+            if abs(float(man.direction @ x[hand.M:]) - target) > PROGRESS_SLACK * h:
+                x, res = project_manifold(man, x_try, progress=(man.direction, target))
         q = x[: hand.M]
         cur = cur.with_pose(man.pose(x[hand.M:]), q)
         worst_res = max(worst_res, res)
@@ -239,15 +252,24 @@ def integrate_object_motion(
                         None if motion_space is None else np.asarray(motion_space, dtype=float))
 
 
+#: a step of :func:`integrate_object_motion` whose projection moved the object more than this
+#: fraction of the step off its planned progress along the direction is projected again with the
+#: progress held
+PROGRESS_SLACK = 0.1
+#: and by more than this (scene units, radians) in a densified segment
+PROGRESS_FLOOR = 1e-9
+
+
 def corner_normal(scene: Scene, hand: HandKinematics, ref: BodyRef, q: Array, pose: Pose,
                   point_object: Array) -> Array | None:
     """The contact normal ``(d,)`` (object frame, unit, into the object) of a contact whose object
     point ``point_object`` ``(d,)`` is on a vertex or an edge of the object (a box corner on the
     table, a box edge across a forearm): there the object has a normal cone, not a normal, and
     the normal is the smooth body's, its outward surface normal at the point (a fixed body's
-    face, a link's capsule at ``q`` ``(M,)``). ``None`` where the object is smooth at the point
-    (its own normal holds) or the body has no single normal there (a URDF collision mesh, a bare
-    segment, an edge of a fixed body)."""
+    face, a link's capsule at ``q`` ``(M,)``); where that lies outside the object's normal cone
+    (a link lying along a face up to its edge, rolled a little on the face), the face's normal.
+    ``None`` where the object is smooth at the point (its own normal holds) or the body has no
+    single normal there (a URDF collision mesh, a bare segment, an edge of a fixed body)."""
     d = scene.dim
     cone = shape_normal_cone(scene.object.shape, point_object, d, GEOMETRY_TOL)
     if cone is None or cone.generators.shape[0] < 2:  # a face (or a mesh): the object's own normal
@@ -264,7 +286,14 @@ def corner_normal(scene: Scene, hand: HandKinematics, ref: BodyRef, q: Array, po
     if bcone is None or bcone.generators.shape[0] != 1:
         return None
     u = pose.R_d.T @ bcone.generators[0]
-    return np.asarray(u / np.linalg.norm(u))
+    u = u / np.linalg.norm(u)
+    if cone.distance(-u) > 1e-9:
+        # the body's normal turned out of the object's normal cone (a link lying along a face whose
+        # line contact ends at the face's edge, rolled on the face by a small turn): the contact is
+        # the face's, whose normal is the cone's nearest generator
+        g = cone.generators[int(np.argmax(cone.generators @ -u))]
+        return np.asarray(-g / np.linalg.norm(g))
+    return np.asarray(u)
 
 
 def keep_contacts(state: GraspState, keep: Sequence[int], q: Array) -> GraspState:
@@ -286,7 +315,7 @@ class ConstrainedObjectMotion:
     max_residual: float  # largest |F(x)| over the dense path
     max_joint_step: float  # largest joint-space step between consecutive checked states
     states_checked: int
-    planner_states: int  # states of the solution path before densification
+    planner_states: int  # states of OMPL's solution path before densification (0: the integrated path)
     ompl_seconds: float
 
 
@@ -316,7 +345,9 @@ def plan_object_motion(
     ``goal`` (``goal.direction`` in ``goal.motion_space``; else the straight line to its end), the
     validity checker keeps it between the two ends of that path and clear of the fixed bodies, and
     every segment of the densified object path must lie within :data:`MIN_DIRECTION_COSINE` of
-    the direction. ``None`` if OMPL finds no path or the check fails."""
+    the direction. Where OMPL finds no path that passes, the integrated path ``goal`` itself is
+    densified and checked the same way (its ``planner_states`` then 0). ``None`` if neither
+    passes."""
     hand = model.hand
     q0, q1 = state.q, goal.q_path[-1]
     s1 = pose_displacement(state, goal.pose_path[-1])
@@ -414,25 +445,37 @@ def plan_object_motion(
     ss.setPlanner(planner)
     t0 = time.perf_counter()
     status = ss.solve(ob.PlannerTerminationCondition(budget.condition()))
-    if not bool(status) or not ss.haveExactSolutionPath():
-        return None
-    path = ss.getSolutionPath()
-    planner_states = int(path.getStateCount())
-    X = np.array([read(path.getState(i)) for i in range(path.getStateCount())])  # (k, n)
-    X = _densify(man, X, DENSE_STEP, tolerance)
-    dt = time.perf_counter() - t0
-    step = float(np.max(np.abs(np.diff(X[:, :M], axis=0)))) if len(X) > 1 else 0.0
-    residual = max(float(np.linalg.norm(man.function(x))) for x in X)
-    if step > DENSE_STEP or residual > 100 * tolerance or not all(valid(x) for x in X):
-        return None
-    if float(np.max(np.abs(X[-1] - x1))) > 1e-6:
-        return None
-    if man.direction is not None and direction_cosines(X[:, M:], man.direction).min() < MIN_DIRECTION_COSINE:
-        return None  # a segment of the object path goes back along its line
-    poses = np.array([man.pose(x[M:]).vector() for x in X])  # (k, D)
-    length = float(np.sum(np.linalg.norm(np.diff(poses, axis=0), axis=1)))
-    return ConstrainedObjectMotion(X[:, :M], poses, X[:, M:], goal.separations, length, residual, step, len(X),
-                                   planner_states, dt)
+
+    def checked(X: Array, planner_states: int) -> ConstrainedObjectMotion | None:
+        """The path ``X`` ``(k, n)`` densified and every state of it checked, or None."""
+        X = _densify(man, X, DENSE_STEP, tolerance)
+        step = float(np.max(np.abs(np.diff(X[:, :M], axis=0)))) if len(X) > 1 else 0.0
+        residual = max(float(np.linalg.norm(man.function(x))) for x in X)
+        if step > DENSE_STEP or residual > 100 * tolerance or not all(valid(x) for x in X):
+            return None
+        if float(np.max(np.abs(X[-1] - x1))) > 1e-6:
+            return None
+        if man.direction is not None and direction_cosines(X[:, M:], man.direction).min() < MIN_DIRECTION_COSINE:
+            return None  # a segment of the object path goes back along its line
+        poses = np.array([man.pose(x[M:]).vector() for x in X])  # (k, D)
+        length = float(np.sum(np.linalg.norm(np.diff(poses, axis=0), axis=1)))
+        return ConstrainedObjectMotion(X[:, :M], poses, X[:, M:], goal.separations, length, residual, step, len(X),
+                                       planner_states, time.perf_counter() - t0)
+
+    out = None
+    if bool(status) and ss.haveExactSolutionPath():
+        path = ss.getSolutionPath()
+        out = checked(np.array([read(path.getState(i)) for i in range(path.getStateCount())]),
+                      int(path.getStateCount()))
+    if out is None and goal.direction is not None and goal.motion_space is not None:
+        # OMPL found no path its checks pass (on the curved set of object motions of two arms each
+        # holding the box with a sticking and a sliding link its paths go back and forth along
+        # the direction): the integrated path itself, densified and every state checked the
+        # same way, marked by ompl_planner_states = 0
+        X = np.array([np.concatenate([q, pose_displacement(state, v)])
+                      for q, v in zip(goal.q_path, goal.pose_path, strict=True)])
+        out = checked(X, 0)
+    return out
 
 
 #: every segment of an object path lies within this cosine of the analysed direction (issue 11)
@@ -454,13 +497,44 @@ def direction_cosines(S: Array, direction: Array, floor: float = 1e-12) -> Array
 def _densify(man: ContactManifold, X: Array, max_step: float, tolerance: float) -> Array:
     """Insert states between consecutive states of ``X`` ``(k, M + D)`` so that no joint moves more
     than ``max_step``: points of the ambient segment projected back onto the manifold (Newton steps
-    with the pseudo-inverse of ``F'``, as OMPL's projection does)."""
-    M = man.M
+    with the pseudo-inverse of ``F'``, as OMPL's projection does). A projected point whose object
+    moved off its share of the segment's progress along the direction (a projection that slid
+    along the manifold: redundant rows of line contacts) is projected again with that progress
+    held, and a pair of states still farther apart than ``max_step`` is split again, up to
+    :data:`DENSIFY_DEPTH` times."""
     out = [X[0]]
     for a, b in itertools.pairwise(X):
-        k = int(np.ceil(float(np.max(np.abs(b[:M] - a[:M]))) / max_step * 1.02))
-        for t in np.arange(1, k) / max(k, 1):
-            out.append(project_manifold(man, a + t * (b - a), tolerance)[0])
-        out.append(b)
+        out.extend(_fill(man, a, b, max_step, tolerance, 0))
     return np.array(out)
 
+
+#: how many times :func:`_densify` splits a segment whose projected states are still too far apart
+DENSIFY_DEPTH = 4
+
+
+def _fill(man: ContactManifold, a: Array, b: Array, max_step: float, tolerance: float, depth: int) -> list[Array]:
+    """The states after ``a`` up to ``b`` (included) of the densified segment ``a -> b``."""
+    M = man.M
+    k = int(np.ceil(float(np.max(np.abs(b[:M] - a[:M]))) / max_step * 1.02))
+    pts = []
+    for t in np.arange(1, k) / max(k, 1):
+        y = a + t * (b - a)
+        p = project_manifold(man, y, tolerance)[0]
+        if man.direction is not None:
+            target = float(man.direction @ y[M:])
+            share = abs(float(man.direction @ (b - a)[M:]))  # the segment's progress
+            if abs(float(man.direction @ p[M:]) - target) > PROGRESS_SLACK * share + PROGRESS_FLOOR:
+                p = project_manifold(man, y, tolerance, progress=(man.direction, target))[0]
+        pts.append(p)
+    pts.append(b)
+    if depth >= DENSIFY_DEPTH:
+        return pts
+    out: list[Array] = []
+    prev = a
+    for p in pts:
+        if float(np.max(np.abs(p[:M] - prev[:M]))) > max_step:
+            out.extend(_fill(man, prev, p, max_step, tolerance, depth + 1))
+        else:
+            out.append(p)
+        prev = p
+    return out

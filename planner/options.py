@@ -29,6 +29,14 @@ class PlannerOptions:
     #: always / never. Any object shape: disks and spheres keep touching by their radius, other
     #: shapes (a box's corners on a table) keep the contact point on the fixed body.
     sliding_motions: bool | None = None
+    #: object motions towards a goal pose in which the contacts of a whole arm's distal link
+    #: slide along the object's faces (S at links, :func:`planner.motion_edges._link_slide_sets`),
+    #: off by default: on Baxter's hug with line contacts (examples/baxter_hug_box_lines.json) the
+    #: straight lift with the forearms sliding replays in MuJoCo for its first 2 cm only, needs the
+    #: elbows to roll along the faces, which glued points follow to first order only (the capsule
+    #: sinks rho (1 - cos) into the face, 1.5 um after 1 cm, refused by planner.verify), and the
+    #: third re-analysed motion has no torque set (32)
+    link_sliding: bool = False
     #: longest object motion towards a goal pose, and length of a sliding motion (object sizes):
     #: the torque of T is chosen for the start of the motion (first order), so a longer way is
     #: taken in several motions, each re-analysed

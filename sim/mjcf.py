@@ -34,8 +34,8 @@ Frames and coordinates are the scene's (world frame, scene length units).
 * **Fixed bodies** are static world geoms: segment -> capsule, box -> box, disk/sphere -> sphere
   (centred at the world origin, as in :mod:`analysis.geometry`), polygon -> convex prism.
 * **Collision radius ``eps``** (``eps_rel`` times the object size, default 1 %). Scene links may
-  have radius 0 and segments are lines, which MuJoCo cannot collide. Every hand geom (links and
-  fixed bodies) is therefore the scene shape *grown* by ``eps`` (capsule radius ``radius + eps``,
+  have radius 0 and segments are lines, which MuJoCo cannot collide. Every capsule link and
+  fixed body is therefore the scene shape *grown* by ``eps`` (capsule radius ``radius + eps``,
   box half-sizes ``+ eps``, sphere radius ``+ eps``, polygons offset outwards by ``eps``), and the
   object is the scene shape *shrunk* by ``eps`` (sphere/disk radius ``- eps``, box half-sizes
   ``- eps``, polygon offset inwards, cylinder radius and half-height ``- eps``). Growing one body
@@ -44,13 +44,22 @@ Frames and coordinates are the scene's (world frame, scene length units).
   and polygons are rounded or sharpened by at most ``eps``), so every scene contact is exactly
   touching in MuJoCo at the scene configuration. MuJoCo's contact point then lies at
   ``p + eps n`` (``p`` the scene point, ``n`` its normal), which is all the difference.
-* **Collisions** are explicit ``<pair>`` elements only: every link and every fixed body against
-  the object, with the scene contact's ``mu`` (``default_mu`` for bodies without a scene contact;
-  the mean if a body has several scene contacts). Links do not collide with each other nor with
-  fixed bodies (the cross-check is local: small motions about the scene configuration). Friction
-  cones are elliptic (the true Coulomb cone ``|t| <= mu n``, which the paper's 2-D cone is exactly
-  and its 3-D ``k``-sided pyramid approximates from inside); ``condim`` 3 (1 for ``mu = 0``).
-  Pairs push only at penetration (``margin = 0``) but also report geoms closer than
+  A URDF collision shape keeps its own size and its pair with the object has ``margin = eps``:
+  MuJoCo's contact constraint acts on ``dist - margin`` (the solver's violation ``efc_pos -
+  efc_margin``), so the shape behaves as its exact dilation by the ball of radius ``eps`` (the
+  Minkowski sum, edges and corners of a box rounded by ``eps``, not grown square), and every
+  scene contact on it touches at the scene configuration: MuJoCo's ``dist`` is ``eps`` there,
+  its contact point halfway between the shape's surface and the shrunk object's, ``p + eps n /
+  2``. (Growing a box by ``eps`` would push its edges ``(sqrt(2) - 1) eps`` and its corners
+  ``(sqrt(3) - 1) eps`` into an object they touch.)
+* **Collisions** are explicit ``<pair>`` elements only: every link geom and every fixed body
+  against the object, with the scene contact's ``mu`` (``default_mu`` for bodies without a scene
+  contact; the mean if a body has several scene contacts; every geom of a link the link's).
+  Links do not collide with each other nor with fixed bodies (the cross-check is local: small
+  motions about the scene configuration). Friction cones are elliptic (the true Coulomb cone
+  ``|t| <= mu n``, which the paper's 2-D cone is exactly and its 3-D ``k``-sided pyramid
+  approximates from inside); ``condim`` 3 (1 for ``mu = 0``). Pairs push only at penetration
+  (``margin = 0``; a URDF shape's: ``eps``, above) but also report geoms closer than
   ``detect_rel`` times the object size (``gap``, inactive contacts), for gap measurements.
 * **External wrench**: gravity is off; ``w_ex`` is applied every step at ``p_o`` through
   ``xfrc_applied`` of the object body, whose centre of mass is placed at ``p_o`` (2-D
@@ -94,6 +103,7 @@ from analysis._types import Array
 from analysis.exceptions import SceneError
 from analysis.geometry import object_origin, object_rotation, object_size
 from analysis.kinematics import FingerModel, HandKinematics
+from analysis.mesh import primitive_of
 from analysis.pose import Pose
 from analysis.rotations import matrix_to_quat_wxyz, matrix_to_rotvec, rotz
 from analysis.scene import Box, Cylinder, Disk, Polygon, Scene, Segment, Sphere
@@ -264,6 +274,9 @@ class _LinkSpec:
     seg_a: Array  # (3,) segment end points in this body's frame
     seg_b: Array  # (3,)
     radius: float
+    #: the URDF collision shapes in this body's frame, ``(coal geometry, R (3, 3), t (3,))``
+    #: (meshes as their convex hulls); None: the body is the capsule about its segment
+    shapes: tuple[tuple[object, Array, Array], ...] | None = None
 
 
 def _finger_links(finger: FingerModel) -> list[_LinkSpec]:
@@ -304,6 +317,8 @@ def _finger_links(finger: FingerModel) -> list[_LinkSpec]:
                 )
             axis = rotvec / np.linalg.norm(rotvec)
         a, b = finger.body_segment(k, z)
+        local = getattr(finger, "collision_shapes", None)
+        shapes = None if local is None else local(k)
         out.append(
             _LinkSpec(
                 name=link_body_name(finger.name, k),
@@ -314,6 +329,8 @@ def _finger_links(finger: FingerModel) -> list[_LinkSpec]:
                 seg_a=R_k.T @ (np.asarray(a, dtype=float) - p_k),
                 seg_b=R_k.T @ (np.asarray(b, dtype=float) - p_k),
                 radius=finger.body_radius(k),
+                shapes=None if shapes is None else tuple(
+                    (g, np.asarray(R, dtype=float), np.asarray(t, dtype=float)) for g, R, t in shapes),
             )
         )
         R_par, p_par = R_k, p_k
@@ -328,6 +345,39 @@ def _segment_geom(name: str, a: Array, b: Array, radius: float) -> str:
     if np.linalg.norm(np.asarray(b) - np.asarray(a)) < 1e-12:
         return f'<geom name="{name}" type="sphere" pos="{_v(a)}" size="{_f(radius)}"/>'
     return f'<geom name="{name}" type="capsule" fromto="{_v(a)} {_v(b)}" size="{_f(radius)}"/>'
+
+
+def link_geom_name(finger: str, k: int, i: int = 0) -> str:
+    """MuJoCo geom name of the ``i``-th collision shape of body ``k`` of a finger (the capsule
+    of a capsule link, and the first URDF shape, are named as the body)."""
+    base = link_body_name(finger, k)
+    return base if i == 0 else f"{base}#{i}"
+
+
+def _shape_geom(name: str, geom: object, R: Array, t: Array, assets: list[str]) -> str:
+    """A URDF collision shape (coal geometry placed by ``R`` ``(3, 3)``, ``t`` ``(3,)`` in its
+    body's frame) as a MuJoCo geom of the same size; a mesh as its convex hull's vertices."""
+    place = f'pos="{_v(t)}" quat="{_v(matrix_to_quat_wxyz(R))}"'
+    prim = primitive_of(geom)  # SceneError for a shape the detector does not take either
+    if prim.kind != "hull":
+        return f'<geom name="{name}" type="{prim.kind}" {place} size="{_v(prim.size)}"/>'
+    assert prim.vertices is not None
+    mesh = "mesh:" + name
+    assets.append(f'<mesh name="{mesh}" vertex="{_v(prim.vertices)}"/>')
+    return f'<geom name="{name}" type="mesh" mesh="{mesh}" {place}/>'
+
+
+def _link_geoms(finger: str, k: int, lk: _LinkSpec, eps: float, assets: list[str]) -> list[tuple[str, str, float]]:
+    """The geoms of one link: ``(MJCF, geom name, pair margin)``: its capsule grown by ``eps``
+    (margin 0), or its URDF collision shapes at their own size (margin ``eps``)."""
+    if lk.shapes is None:
+        name = link_geom_name(finger, k)
+        return [(_segment_geom(name, lk.seg_a, lk.seg_b, lk.radius + eps), name, 0.0)]
+    out = []
+    for i, (g, R, t) in enumerate(lk.shapes):
+        name = link_geom_name(finger, k, i)
+        out.append((_shape_geom(_xml_escape(name), g, R, t, assets), name, eps))
+    return out
 
 
 def _object_geom(scene: Scene, eps: float, s: float, assets: list[str]) -> str:
@@ -398,8 +448,10 @@ def geom_of_contact(hand: HandKinematics, body: str) -> str:
     return link_body_name(hand.fingers[ref.finger].name, ref.link)
 
 
-def _geom_mu(scene: Scene, hand: HandKinematics, geom: str, default: float) -> float:
-    mus = [c.mu for c in scene.contacts if geom_of_contact(hand, c.body) == geom]
+def _geom_mu(scene: Scene, hand: HandKinematics, body: str, default: float) -> float:
+    """Friction of the pairs of a MuJoCo body (a link ``"<finger>/<k>"`` or a fixed body's geom
+    name): the mean ``mu`` of the scene contacts on it, else ``default``."""
+    mus = [c.mu for c in scene.contacts if geom_of_contact(hand, c.body) == body]
     return float(np.mean(mus)) if mus else float(default)
 
 
@@ -417,12 +469,12 @@ def build_mjcf(scene: Scene, params: SimulationParams = DEFAULT_PARAMS, tau: Arr
     eps = params.eps_rel * s
     dim = scene.dim
     assets: list[str] = []
-    body_geoms: list[tuple[str, str]] = []  # (scene body name, MuJoCo geom name)
+    body_geoms: list[tuple[str, str, float]] = []  # (MuJoCo body or fixed geom, geom name, pair margin)
 
     world: list[str] = []
     for i, fb in enumerate(scene.fixed_bodies):
         world.append(_fixed_geom(scene, i, eps, s, assets))
-        body_geoms.append((fb.name, fixed_geom_name(fb.name)))
+        body_geoms.append((fixed_geom_name(fb.name), fixed_geom_name(fb.name), 0.0))
 
     # object
     p_o = np.zeros(3)
@@ -452,6 +504,7 @@ def build_mjcf(scene: Scene, params: SimulationParams = DEFAULT_PARAMS, tau: Arr
         for k in reversed(range(len(links))):
             lk = links[k]
             a_name, b_name = link_site_names(fm.name, k)
+            geoms = _link_geoms(fm.name, k, lk, eps, assets)
             hinge = ""
             if lk.joint is not None:
                 hinge = (
@@ -463,12 +516,12 @@ def build_mjcf(scene: Scene, params: SimulationParams = DEFAULT_PARAMS, tau: Arr
                 f'<inertial pos="0 0 0" mass="{_f(der.link_mass)}" '
                 f'diaginertia="{_v([der.link_inertia] * 3)}"/>'
                 + hinge
-                + _segment_geom(lk.name, lk.seg_a, lk.seg_b, lk.radius + eps)
+                + "".join(g for g, _, _ in geoms)
                 + f'<site name="{a_name}" pos="{_v(lk.seg_a)}"/><site name="{b_name}" pos="{_v(lk.seg_b)}"/>'
                 + xml
                 + "</body>"
             )
-            body_geoms.append((lk.name, lk.name))
+            body_geoms += [(lk.name, name, margin) for _, name, margin in geoms]
         world.append(xml)
         for k in range(fm.n_joints):
             jn = joint_name(fm.name, k)
@@ -480,13 +533,13 @@ def build_mjcf(scene: Scene, params: SimulationParams = DEFAULT_PARAMS, tau: Arr
     solimp[2] *= s
     detect = params.detect_rel * s
     pairs = []
-    for _body, geom in body_geoms:
-        mu = max(_geom_mu(scene, hand, geom, params.default_mu), 0.0)
+    for body, geom, margin in body_geoms:
+        mu = max(_geom_mu(scene, hand, body, params.default_mu), 0.0)
         condim = 3 if mu > 0 else 1
         pairs.append(
-            f'<pair geom1="{geom}" geom2="{OBJECT_GEOM}" condim="{condim}" '
+            f'<pair geom1="{_xml_escape(geom)}" geom2="{OBJECT_GEOM}" condim="{condim}" '
             f'friction="{_f(max(mu, 1e-5))} {_f(max(mu, 1e-5))} 0 0 0" '
-            f'solref="{_f(tc)} {_f(dr)}" solimp="{_v(solimp)}" margin="0" gap="{_f(detect)}"/>'
+            f'solref="{_f(tc)} {_f(dr)}" solimp="{_v(solimp)}" margin="{_f(margin)}" gap="{_f(detect)}"/>'
         )
 
     # keyframe
@@ -603,6 +656,7 @@ __all__ = [
     "geom_of_contact",
     "joint_name",
     "link_body_name",
+    "link_geom_name",
     "link_site_names",
     "object_pose",
     "object_qpos_address",

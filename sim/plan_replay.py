@@ -27,11 +27,16 @@ At every moment each finger is either
 
 * **torque-controlled** (it has a contact in the planned state of that moment): its motors
   apply the entries of the current torque ``tau`` ``(M,)`` (scene joint order), the paper's
-  model of a grasp (eq. 18 holding, eq. 32 moving); with ``options.posture_rate > 0``, during
-  object motions, plus a posture torque on the hand's self-motion only (joint motions that move
-  no kept contact point: :func:`sim.torque_replay.self_motion_torque`), which a redundant arm
-  needs (the Panda's forearm push: under constant torques its elbow swings out of its plane after
-  about 6 cm) and which is zero on the planned path; or
+  model of a grasp (eq. 18 holding, eq. 32 moving); with ``options.posture_rate > 0`` plus a
+  posture torque on the hand's self-motion only (joint motions that move no kept contact point:
+  :func:`sim.torque_replay.self_motion_torque`), towards the planned configuration of the
+  moment, which a redundant arm needs (the Panda's forearm push: under constant torques its
+  elbow swings out of its plane after about 6 cm; the Allegro's four-joint fingers holding a
+  cylinder with their tips: the object drifts 50 um within 0.09 s without it, 24 um with it) and
+  which is zero on the planned path. It acts during object motions (the contacts the step keeps)
+  and while the grasp holds: the start ramp (every contact of the start), a release (the
+  contacts it keeps, at the configuration before), a contact (the grasp before, then the grasp
+  with the new contact at the planned end) and the optional ``final_hold``; or
 * **driven** (it has no contact: it is moving to or from the object along its planned joint
   path, or waiting): it follows the planned joint waypoints *kinematically*. Before every
   MuJoCo step its joints' ``qpos`` is set to the path at ``t``, ``qvel`` to the path's velocity
@@ -56,7 +61,13 @@ case).
 * ``release`` (33, F -> D): the ramp to the step's ``tau_st`` unloads the releasing finger (its
   entries are zero: it carries no contact of the combination) while the remaining contacts hold
   the object; then the finger is driven along the step's ``joint_path`` (blended from the
-  simulated configuration into the planned one) while the others keep ``tau_st``.
+  simulated configuration into the planned one) while the others keep ``tau_st``. A finger that
+  lets go of some of its links and keeps others (a link release, :mod:`planner.link_release`)
+  keeps touching, so it stays torque-controlled with ``tau_st``; its path moves none of its kept
+  contact points (the planner projects it onto them), so it is a self-motion, and the posture
+  torque, its reference moving along the path (rate at least ``3 / T`` for the move time ``T``),
+  takes the finger along it: the released link comes off the object (the Allegro thumb's pad,
+  ``tests/sim/test_urdf_geometry.py``) and no force is pushed onto the object.
 * ``contact`` (33, D -> F): the moving finger is driven along ``joint_path`` (the OMPL transfer,
   last waypoint touching) while the others hold with ``tau_st``; on arrival it becomes
   torque-controlled and the torques ramp to the holding torque of the grasp after the step.
@@ -119,7 +130,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -129,7 +140,7 @@ import numpy as np
 from analysis._types import Array
 from analysis.exceptions import SceneError, SolverTimeLimit
 from analysis.geometry import object_size
-from analysis.kinematics import HandKinematics
+from analysis.kinematics import BodyRef, HandKinematics
 from analysis.pose import Pose
 from analysis.scene import Scene
 from planner.plan import Plan, PlanStep
@@ -149,7 +160,7 @@ from sim.mjcf import (
     reset_to_scene,
 )
 from sim.plan_paths import Mask, arc_fractions, driven_profile, interp_rows, move_time, path_deviation
-from sim.torque_replay import self_motion_torque, smooth_ramp
+from sim.torque_replay import self_motion_projector, self_motion_torque, smooth_ramp
 
 # --------------------------------------------------------------------------------------------
 # Options and results
@@ -177,12 +188,18 @@ class PlanSimulationOptions:
     #: returns to the planned posture at this rate), which no contact force can balance and which
     #: vanishes on the planned path, as a whole-arm controller holds a redundant arm's posture
     #: (without it the Panda's push loses the box: its self-motion is unstable under constant
-    #: torques); 0: pure torque control, the paper's model alone
+    #: torques; the same holds while a grasp holds still, the start and regrasps); 0: pure torque
+    #: control, the paper's model alone
     posture_rate: float = 50.0
+    #: seconds the final grasp goes on holding (its holding torque, the posture torque) after the
+    #: last step, a check of how it keeps the object; the final pose is taken after it (0: none)
+    final_hold: float = 0.0
 
     def __post_init__(self) -> None:
         if not self.path_interval > 0:
             raise ValueError(f"path_interval: must be positive (got {self.path_interval!r})")
+        if not (self.final_hold >= 0 and np.isfinite(self.final_hold)):
+            raise ValueError(f"final_hold: must be a finite time >= 0 in s (got {self.final_hold!r})")
         if not (self.posture_rate >= 0 and np.isfinite(self.posture_rate)):
             raise ValueError(f"posture_rate: must be a finite rate >= 0 in 1/s (got {self.posture_rate!r})")
 
@@ -633,6 +650,8 @@ def simulate_plan(
     hold0 = first.tau_stationary if first.tau_stationary is not None else np.zeros(hand.M)
     busy0 = _fingers_touching(hand, first.contacts_before)
     free0 = _mask(hand, set(range(len(hand.fingers))) - busy0)
+    before = steps[0].before
+    run.posture = _hold_posture(run, hand, _finger_points(hand, before.contacts, "F" * before.L), first.q_path[0])
     try:
         run.ramp_to(hold0, first.object_path[:1], free0, first.q_path[0], wrench=True)
     except _Drop as e:
@@ -648,6 +667,9 @@ def simulate_plan(
         t0, pose0 = run.t, run.pose()
         run.max_dev, run.track, run.step_index = 0.0, 0.0, step.index
         run.posture = None  # an object motion sets its own (options.posture_rate)
+        if st.kind != "object_motion":  # the contacts the regrasp keeps hold at the planned posture
+            letters = st.combination if st.kind == "release" else "F" * step.before.L  # a release's D lets go
+            run.posture = _hold_posture(run, hand, _finger_points(hand, step.before.contacts, letters), st.q_path[0])
         planned = st.object_path[-1] - st.object_path[0]  # (D,)
         busy_before = _fingers_touching(hand, st.contacts_before)
         busy_after = _fingers_touching(hand, st.contacts_after)
@@ -660,10 +682,24 @@ def simulate_plan(
                 assert tau_st is not None
                 run.ramp_to(tau_st, st.object_path[:1], _mask(hand, all_f - busy_before), st.q_path[0])
                 driven = _mask(hand, all_f - busy_after)
-                T = move_time(st.q_path, driven, options.joint_speed, options.min_move_time)
-                run.run(T, _constant(tau_st), st.object_path[:1], driven, driven_profile(st.q_path, driven, run.q(), T))
+                # a finger that lets go of some links and keeps others (a link release) stays
+                # torque-controlled; its path moves none of the kept contact points, so the
+                # self-motion posture, following the path, takes it along
+                span = np.ptp(st.q_path, axis=0)  # (M,)
+                link_release = ~driven & (span > 1e-9)
+                T = move_time(st.q_path, driven | link_release, options.joint_speed, options.min_move_time)
+                kept = _finger_points(hand, step.before.contacts, st.combination)
+                if np.any(link_release) and options.posture_rate > 0:
+                    run.posture = _hold_posture(run, hand, kept, st.q_path[0],
+                                                moving=_after(run, driven_profile(st.q_path, driven | link_release,
+                                                                                  run.q(), T)),
+                                                rate=max(options.posture_rate, LINK_RELEASE_TIME_CONSTANTS / T))
+                run.run(T, _constant(tau_st), st.object_path[:1], driven,
+                        driven_profile(st.q_path, driven, run.q(), T))
+                run.posture = _hold_posture(run, hand, kept, st.q_path[-1])
                 run.ramp_to(tau_st, st.object_path[:1], driven, st.q_path[-1])  # settle
-                note = f"released in {T:.3g} s"
+                note = f"released in {T:.3g} s" + (" (a link release, by the posture torque)"
+                                                    if np.any(link_release) else "")
             elif st.kind == "contact":
                 driven = _mask(hand, all_f - busy_before)
                 if st.tau_stationary is not None:
@@ -672,6 +708,8 @@ def simulate_plan(
                 hold = run.tau.copy()
                 run.run(T, _constant(hold), st.object_path[:1], driven, driven_profile(st.q_path, driven, run.q(), T))
                 after = _mask(hand, all_f - busy_after)
+                run.posture = _hold_posture(run, hand, _finger_points(hand, step.after.contacts, "F" * step.after.L),
+                                            st.q_path[-1])  # the new contact held too, at the planned end
                 if nxt is not None and nxt.tau_stationary is not None:
                     run.ramp_to(nxt.tau_stationary, st.object_path[-1:], after, st.q_path[-1])
                     note = f"moved in {T:.3g} s, loaded with the next step's tau_st"
@@ -693,12 +731,92 @@ def simulate_plan(
             duration=run.t - t0, dropped=dropped, note=note,
         ))
         run.sample()  # the pose this step's simulated displacement ends at
+    if not dropped and options.final_hold > 0:
+        last = steps[-1]
+        final_state = last.after
+        run.posture = _hold_posture(run, hand, _finger_points(hand, final_state.contacts, "F" * final_state.L),
+                                    last.transition.q_path[-1])
+        free = _mask(hand, set(range(len(hand.fingers))) - _fingers_touching(hand, last.transition.contacts_after))
+        try:
+            run.run(options.final_hold, _constant(run.tau.copy()), last.transition.object_path[-1:], free,
+                    lambda t: last.transition.q_path[-1])
+        except _Drop as e:
+            dropped, reason = True, f"while holding after the last step: {e}"
+        run.sample()
     return PlanSimulation(
         steps=tuple(out), start_pose=plan.start_pose, planned_final_pose=plan.final_pose,
         simulated_final_pose=run.pose().vector(), object_size=s, force_scale=run.F, dropped=dropped,
         drop_reason=reason, duration=run.t, tolerance=options.tolerance, object_path=run.object_path(),
         start_q=start_q, final_q=run.q(), start_contacts=start_contacts, final_contacts=run.object_contacts(),
     )
+
+
+#: MuJoCo steps between two evaluations of the self-motion projector of a holding grasp (its
+#: Jacobians): the hand hardly moves while it holds, and the posture returns at 50 1/s, slow next to
+#: the 5 ms this spans at the 0.2 ms step
+HOLD_PROJECTOR_EVERY = 25
+
+
+#: a link release (the finger keeps other contacts, so it stays torque-controlled and the posture
+#: torque takes it along its path) lasts the finger's move time ``T`` with the posture rate raised
+#: to at least this many over ``T`` (1/s), so the finger keeps up with its path
+LINK_RELEASE_TIME_CONSTANTS = 3.0
+
+
+def _after(run: _Run, profile: Callable[[float], Array]) -> Callable[[], Array]:
+    """``profile`` ``(M,)`` read at the run's time since now."""
+    t_start = run.t
+    return lambda: profile(run.t - t_start)
+
+
+def _finger_points(hand: HandKinematics, contacts: Sequence[Any], letters: str) -> list[tuple[BodyRef, Array]]:
+    """``(finger body, point in its frame)`` of the contacts (:class:`planner.state.GraspContact`)
+    on finger links whose letter is not D."""
+    return [(ref, c.point_body) for c, letter in zip(contacts, letters, strict=True)
+            if letter != "D" and (ref := hand.resolve_body(c.body)) is not None and ref.finger is not None]
+
+
+def _hold_posture(run: _Run, hand: HandKinematics, points: list[tuple[BodyRef, Array]],
+                  q_ref: Array, moving: Callable[[], Array] | None = None,
+                  rate: float | None = None) -> Callable[[Array], Array] | None:
+    """The self-motion posture torque while the grasp holds (the start ramp, regrasp steps, the
+    final hold): the contact ``points`` held where they are, the hand pulled along its
+    self-motion towards the planned configuration ``q_ref`` ``(M,)``, or ``moving()`` ``(M,)`` (the
+    planned configuration of the moment: a link release); ``None`` when ``options.posture_rate`` is 0."""
+    if not run.options.posture_rate > 0:
+        return None
+    gains = (run.options.posture_rate if rate is None else rate) * run.b_q
+    q_fixed = np.array(q_ref, dtype=float)
+    free: list[slice] = []  # fingers without a contact: their whole configuration is self-motion
+    redundant: list[tuple[slice, list[tuple[BodyRef, Array]]]] = []  # fingers with self-motion left
+    for f in range(len(hand.fingers)):
+        sl = hand.finger_slice(f)
+        mine = [pt for pt in points if pt[0].finger == f]
+        if not mine:
+            free.append(sl)
+            continue
+        probe = self_motion_torque(hand, mine, q_fixed, q_fixed + 1.0, np.ones(hand.M))[sl]  # P P 1 on the finger
+        if float(np.max(np.abs(probe))) > 1e-9:  # (every joint of a planar two-link finger moves its contact)
+            redundant.append((sl, mine))
+    if not free and not redundant:
+        return None
+
+    projectors: list[Array] = []  # (M, M) per redundant finger, renewed every HOLD_PROJECTOR_EVERY calls
+    calls = [0]
+
+    def torque(q: Array) -> Array:
+        out = np.zeros(hand.M)
+        q_ref = q_fixed if moving is None else moving()
+        for sl in free:
+            out[sl] = gains[sl] * (q_ref[sl] - q[sl])
+        if calls[0] % HOLD_PROJECTOR_EVERY == 0:
+            projectors[:] = [self_motion_projector(hand, mine, q) for _, mine in redundant]
+        calls[0] += 1
+        for (sl, _), P in zip(redundant, projectors, strict=True):
+            out[sl] = (P @ (gains * (P @ (q_ref - q))))[sl]
+        return out
+
+    return torque
 
 
 def _posture(run: _Run, hand: HandKinematics, step: PlanStep,

@@ -171,14 +171,19 @@ def self_motion_torque(hand: HandKinematics, points: list[tuple[BodyRef, Array]]
     orthogonal to ``range(J_c^T)``, so no contact force can balance it: it moves the hand along
     its self-motion, back onto the planned posture, and vanishes there; the torques that reach
     the contacts (``J_c^+T tau``) are unchanged by it."""
+    P = self_motion_projector(hand, points, q)  # (M, M)
+    return np.asarray(P @ (np.asarray(gains, float) * (P @ (np.asarray(q_ref, float) - np.asarray(q, float)))))
+
+
+def self_motion_projector(hand: HandKinematics, points: list[tuple[BodyRef, Array]], q: Array) -> Array:
+    """``P = I - J_c^+ J_c`` ``(M, M)`` at ``q`` ``(M,)``: the projector onto the joint motions that
+    move none of the contact ``points`` (:func:`self_motion_torque`)."""
     rows = [hand.point_jacobian(ref, hand.point_position(ref, pb, q), q) for ref, pb in points]
     M = hand.M
-    if rows:
-        J = np.vstack(rows)  # (3 k, M)
-        P = np.eye(M) - np.linalg.pinv(J, rcond=1e-10) @ J  # (M, M)
-    else:
-        P = np.eye(M)
-    return np.asarray(P @ (np.asarray(gains, float) * (P @ (np.asarray(q_ref, float) - np.asarray(q, float)))))
+    if not rows:
+        return np.eye(M)
+    J = np.vstack(rows)  # (3 k, M)
+    return np.asarray(np.eye(M) - np.linalg.pinv(J, rcond=1e-10) @ J)
 
 
 def smooth_ramp(t: float, T: float) -> float:

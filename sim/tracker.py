@@ -90,15 +90,28 @@ class ContactTracker:
         }
         for fm in hand.fingers:
             for k, label in enumerate(fm.body_names()):
-                self.name_of_geom[model.geom(link_body_name(fm.name, k)).id] = label
+                body = model.body(link_body_name(fm.name, k)).id
+                for g in np.flatnonzero(model.geom_bodyid == body):  # the capsule, or every URDF shape
+                    self.name_of_geom[int(g)] = label
         # rigid piece of every geom: -1 - geom for static geoms, the weld id for the others
         weld = model.body_weldid[model.geom_bodyid]  # (ngeom,)
         self.piece = np.where(weld == 0, -1 - np.arange(model.ngeom), weld)  # (ngeom,)
-        self.contact_geom = np.array(
-            [model.geom(geom_of_contact(hand, c.body)).id for c in scene.contacts], dtype=int
-        )  # (L,)
-        self.contact_piece = self.piece[self.contact_geom]  # (L,)
+        fixed = {fixed_geom_name(fb.name) for fb in scene.fixed_bodies}
+
+        def piece_of(name: str) -> int:  # a fixed body's geom, or a link's body (any of its geoms)
+            if name in fixed:
+                return int(self.piece[model.geom(name).id])
+            return int(model.body_weldid[model.body(name).id])
+
+        self.contact_piece = np.array([piece_of(geom_of_contact(hand, c.body)) for c in scene.contacts],
+                                      dtype=int)  # (L,)
         self.n_on_piece = {int(p): int(np.sum(self.contact_piece == p)) for p in self.contact_piece}
+        # each hand geom's pair margin with the object (a URDF collision shape's: eps, sim.mjcf):
+        # its own surface is that far inside the distance MuJoCo reports
+        self.margin = np.zeros(model.ngeom)  # (ngeom,)
+        for p in range(model.npair):
+            g1, g2 = int(model.pair_geom1[p]), int(model.pair_geom2[p])
+            self.margin[g1 if g2 == self.obj_geom else g2] = float(model.pair_margin[p])
         # each scene contact's material point on the object, object frame
         R_o, p_o = object_rotation(scene), np.zeros(3)
         p_o[: self.dim] = object_origin(scene)
@@ -195,7 +208,9 @@ class ContactTracker:
         pushing = f_loc[:, 0] > 0.0
         idx, hand_geom, sign, pos, f_loc = idx[pushing], hand_geom[pushing], sign[pushing], pos[pushing], f_loc[pushing]
         k = len(idx)
-        self.penetration.append(float(-np.min(con.dist[idx], initial=0.0)))
+        # penetration of the contact's own surfaces: MuJoCo's distance less the pair's margin
+        # (a URDF collision shape's pair has margin eps, sim.mjcf)
+        self.penetration.append(float(-np.min(con.dist[idx] - con.includemargin[idx], initial=0.0)))
         if k == 0:
             return False
         # orient as hand -> object (MuJoCo: frame[0] is the normal geom1 -> geom2, frame^T f the
@@ -242,13 +257,13 @@ class ContactTracker:
 
     def final_gaps(self, data: mujoco.MjData) -> Array:
         """Gap ``(L,)`` between each contact's hand piece and the object at the current state
-        (negative: penetration). For a piece with one scene contact, the smallest geom distance;
-        with several, the distance of the MuJoCo contacts assigned to each (at least the detection
-        distance when none is assigned)."""
+        (negative: penetration; a geom's pair margin taken off MuJoCo's distance). For a piece with
+        one scene contact, the smallest geom distance; with several, the distance of the MuJoCo
+        contacts assigned to each (at least the detection distance when none is assigned)."""
         model, L = self.model, self.L
         fromto = np.zeros(6)
         dist_geom = {
-            g: float(mujoco.mj_geomDistance(model, data, g, self.obj_geom, self.s, fromto))
+            g: float(mujoco.mj_geomDistance(model, data, g, self.obj_geom, self.s, fromto)) - self.margin[g]
             for g in range(model.ngeom)
             if g != self.obj_geom and int(self.piece[g]) in self.n_on_piece
         }
@@ -260,7 +275,8 @@ class ContactTracker:
         local = np.full(L, np.inf)
         for r, i in enumerate(which):
             if i >= 0:
-                local[i] = min(local[i], float(data.contact.dist[idx[r]]))
+                con = data.contact
+                local[i] = min(local[i], float(con.dist[idx[r]] - con.includemargin[idx[r]]))
         detect = self.params.detect_rel * self.s
         for i in range(L):
             if self.n_on_piece[int(self.contact_piece[i])] >= 2:

@@ -74,10 +74,12 @@ def test_vertex_rows_keep_the_corners_on_the_table_and_match_finite_differences(
     assert abs(man.pose(x[M:]).position[2] - st.position[2]) < 1e-9
 
 
-def test_a_link_sliding_on_a_box_is_refused_naming_the_object_shape(box_scene: Scene) -> None:
+def test_a_link_sliding_on_a_box_edge_is_refused_naming_the_contact(box_scene: Scene) -> None:
+    """A link slides on a box's face (tests/planner/test_line_contacts.py), not on its edge: the
+    forearm across the box's top edge is refused, naming the contact and the reason."""
     hand = HandKinematics.from_scene(box_scene)
     st = state_from_scene(box_scene, hand)
-    with pytest.raises(SceneError, match=r"object\.shape.*contact 0, arm/panda_link4"):
+    with pytest.raises(SceneError, match=r"contacts\.0: a sliding contact of a link \(arm/panda_link4\).*edge"):
         ContactManifold(hand, st, [], [0], box_scene)
 
 

@@ -40,12 +40,14 @@ def test_sliding_rows_jacobian_matches_finite_differences(planar_scene: Scene) -
     np.testing.assert_allclose(row[hand.M:], [0.0, 1.0, 0.0], atol=1e-6)
 
 
-def test_sliding_needs_a_disk_or_sphere(planar_scene: Scene) -> None:
+def test_a_link_slides_on_a_disk_a_sphere_or_a_face(planar_scene: Scene) -> None:
+    """On a box a link's contact slides only on a face (tests/planner/test_line_contacts.py): the
+    disk's contact put on a box it does not lie on is refused, naming the contact."""
     hand = HandKinematics.from_scene(planar_scene)
     st = state_from_scene(planar_scene, hand)
     boxed = planar_scene.model_copy(update={"object": planar_scene.object.model_copy(
         update={"shape": Box(type="box", size=[1.0, 1.0])})})
-    with pytest.raises(SceneError, match=r"object\.shape"):
+    with pytest.raises(SceneError, match=r"contacts\.0: a sliding contact of a link .*face"):
         ContactManifold(hand, st, [], [0], boxed)
 
 

