@@ -146,6 +146,12 @@ class DAFCOracle:
         # with what certifies it optimal for another objective (:meth:`_vertex_sup`); None: infeasible
         self._vertices: dict[bytes, _VertexCache | None] = {}
         self.vertex_hits = 0  # force LPs decided by a certified earlier vertex (no HiGHS call)
+        # planar S-points: the unit slip is +-t (the slip is tangential: the motion space keeps the
+        # normal velocity zero), so the friction columns take one of 2^#S values, one per sign pattern
+        self._T_s = (np.array([system.tangents[i][0] for i in sel.s_index]).reshape(-1, d) if d == 2
+                     else np.zeros((0, d)))  # (#S, 2)
+        self._pattern_G: dict[bytes, tuple[Array, Array]] = {}  # sign pattern -> (G_eff (D, L_c), E (p, #S))
+        self._lp_key: bytes | None = None  # the sign pattern whose S columns the force LP holds
 
     # -- kinematics -----------------------------------------------------------------------------
 
@@ -309,24 +315,28 @@ class DAFCOracle:
         w_ex = self.system.w_ex
         if st.G_c.shape[1] == 0:  # no contact carries force (all D): only w_ex can do work
             return float(dr @ w_ex), np.zeros(0)
+        E: Array | None = None
         if not self.sel.s_index:
-            model = self._force_lp()
             G_eff = st.G_c
             key = b""
+        elif self._d == 2:
+            G_eff, E, key = self._planar_friction(zeta_c)
         else:
             G_eff = st.G_c + kinetic_friction(self.system, self.sel, self.slips_of(zeta_c)).G_w
-            model = self._force_lp()
             key = G_eff[:, self._s_cols].tobytes()  # the LP's rows and objective map depend on these only
+        model = self._force_lp()
         c = G_eff.T @ dr  # (L_c,) work per unit force (units of F0)
         if not witness:
             known = self._vertex_sup(key, c, dr)
             if known is not None:
                 return known
-        if self.sel.s_index:
+        if self.sel.s_index and (E is None or key != self._lp_key):
             s_cols = self._s_cols
-            E = snap(self._XiT @ G_eff[:, s_cols])  # (p, #S), noise-level entries zero as in the base rows
+            if E is None:
+                E = snap(self._XiT @ G_eff[:, s_cols])  # (p, #S), noise-level entries zero as in the base rows
             rows, cols = np.indices(E.shape)
             model.change_coefficients(rows.ravel() + model.n_ub, s_cols[cols.ravel()], E.ravel())
+            self._lp_key = key if self._d == 2 else None
         try:
             res = model.solve(c, maximize=True)
         except SolverError:
@@ -345,6 +355,22 @@ class DAFCOracle:
         self._keep_vertex(key, model, res.x)
         f = res.x * self.system.scales.force
         return float(G_eff.T @ dr @ f + dr @ w_ex), f
+
+    def _planar_friction(self, zeta_c: Array) -> tuple[Array, Array, bytes]:
+        """``G_eff = G_c + G_w`` (eq. 12) of a planar motion, its S columns of the passive equalities
+        ``E = Xi^T G_eff[:, S]`` ``(p, #S)`` and its key: the sign pattern of the slips along the
+        tangents. In 2-D an S-point's slip is tangential (the motion space keeps its normal velocity
+        zero; the null-space basis leaves ~1e-12 of normal component), so its unit slip is exactly
+        ``+-t``: the force LP depends on the motion through these signs only, and one set of rows
+        (with its certified vertices, :meth:`_vertex_sup`) serves every motion of a pattern."""
+        sig = np.where(np.einsum("kd,kd->k", self.slips_of(zeta_c), self._T_s) >= 0.0, 1.0, -1.0)  # (#S,)
+        key = sig.tobytes()
+        known = self._pattern_G.get(key)
+        if known is None:
+            G_eff = self.st.G_c + kinetic_friction(self.system, self.sel, sig[:, None] * self._T_s).G_w  # (D, L_c)
+            known = G_eff, snap(self._XiT @ G_eff[:, self._s_cols])
+            self._pattern_G[key] = known
+        return known[0], known[1], key
 
     def _keep_vertex(self, key: bytes, model: LPModel, x: Array) -> None:
         """Store the force LP's optimal point ``x`` (units of F0) for the rows ``key`` with the

@@ -19,6 +19,7 @@ from analysis.combination import CombinationParts, analyze_combination
 from analysis.contacts import build_system
 from analysis.dafc import _allowable_faces, _face_crossing, dafc_set, default_samples, sample_directions
 from analysis.loader import load_scene
+from analysis.scales import GRIP_BOUND
 from analysis.torques import _nlp_data
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -229,3 +230,43 @@ def test_certified_vertices_decide_as_the_force_lp(planar) -> None:
             if t.member:
                 assert oracle.certify(t)  # the stored vertex's forces pass the newton-level check
     assert hits > 20  # the shortcut was taken, so the comparison tested it
+
+
+def test_planar_force_lp_by_slip_signs_agrees_with_scipy(planar) -> None:
+    # 2-D: the force LP of a motion depends on the S-points' slip signs only (the friction columns
+    # of the exact +-t); its supremum must equal an independent LP with the motion's own slips
+    from scipy.optimize import linprog
+
+    from analysis.friction import kinetic_friction
+
+    rng = np.random.default_rng(17)
+    checked = 0
+    for comb in _SHORTCUT_COMBINATIONS:
+        parts = CombinationParts.build(planar, comb)
+        sy, sel, ms, st, fs = parts.system, parts.sel, parts.ms, parts.st, parts.fs
+        if ms.a_bar == 0 or not sel.s_index:
+            continue
+        oracle = parts.oracle()
+        F0 = sy.scales.force
+        for _ in range(40):
+            zc = rng.standard_normal(ms.a)  # (a,) any motion of the motion space
+            u = zc[:ms.a_bar]
+            dr = ms.Lambda_r_t @ (u / np.linalg.norm(u))
+            zc = zc / np.linalg.norm(u)
+            sl = oracle.slips_of(zc)  # (#S, 2)
+            if np.min(np.linalg.norm(sl, axis=1)) <= 1e-6:
+                continue
+            sup, _ = oracle.work_sup(dr, zc, witness=False)
+            G_eff = st.G_c + kinetic_friction(sy, sel, sl).G_w  # (D, L_c) this motion's own slips
+            res = linprog(-(G_eff.T @ dr), A_ub=np.vstack([fs.C, fs.N.sum(axis=0)]),
+                          b_ub=np.r_[np.zeros(fs.C.shape[0]), GRIP_BOUND * F0],
+                          A_eq=st.Xi.T @ G_eff, b_eq=-(st.Xi.T @ sy.w_ex), bounds=(None, None), method="highs")
+            if res.status == 2:
+                assert sup == -np.inf, (comb, zc)
+                continue
+            assert res.status == 0, (comb, res.message)
+            ref = -res.fun + float(dr @ sy.w_ex)
+            assert sup == pytest.approx(ref, rel=1e-7, abs=1e-7 * F0), (comb, zc)
+            checked += 1
+        assert len(oracle._pattern_G) <= 2 ** len(sel.s_index)
+    assert checked > 100
