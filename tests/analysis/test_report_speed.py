@@ -270,3 +270,26 @@ def test_planar_force_lp_by_slip_signs_agrees_with_scipy(planar) -> None:
             checked += 1
         assert len(oracle._pattern_G) <= 2 ** len(sel.s_index)
     assert checked > 100
+
+
+def test_realisable_direction_nlp_only_when_the_example_direction_has_no_torque_set(planar, monkeypatch) -> None:
+    # the IPOPT search for a realisable direction is the second fallback of the default torque
+    # set: it runs only after the example direction and the certificate's wrench direction failed
+    import analysis.combination as combination
+
+    calls: list[str] = []
+    real = combination.realisable_direction
+
+    def counted(system, sel, *args, **kwargs):
+        calls.append(sel.combination)
+        return real(system, sel, *args, **kwargs)
+
+    monkeypatch.setattr(combination, "realisable_direction", counted)
+    for comb in ("FSFSS", "SFSFS"):  # S-points, and the example direction has a torque set
+        rep = analyze_combination(planar, comb)
+        assert rep.torque is not None and rep.torque_error is None
+    assert calls == []
+    rep = analyze_combination(planar, "DFDFS")  # no DAFC direction tried has a torque set
+    assert calls == ["DFDFS"]
+    assert rep.torque is None and rep.torque_error is not None
+    assert rep.torque_error.endswith("(and 3 other DAFC directions tried)")
