@@ -37,7 +37,7 @@ from analysis.linalg import rank
 from analysis.motion import NULL_ROW_TOL, MotionSpace
 from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, snap
 from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators
-from analysis.solvers.highs import LPModel
+from analysis.solvers.highs import LPModel, LPResult
 from analysis.statics import Statics
 from analysis.torque_conditions import torque_conditions
 
@@ -61,6 +61,15 @@ FARKAS_MARGIN = 1e-6
 VERTEX_POINTS = 48
 VERTEX_ACTIVE_TOL = 1e-9
 VERTEX_DUAL_TOL = 1e-12
+#: The key of the relaxed LP's vertices among the force LP's (:meth:`DAFCOracle._vertex_sup`; the
+#: force LP's keys are empty or whole float64 arrays, never 1 byte long).
+_RELAXED_KEY = b"R"
+#: Optimal bases kept per redundancy LP (:class:`_RhsBases`), the least multiplier (relative to the
+#: objective) that makes a basis's optimum unique, and the primal slack (relative to the
+#: right-hand side) a reused basis point may have.
+BASES_KEPT = 16
+BASIS_DUAL_MIN = 1e-7
+BASIS_PRIMAL_TOL = 1e-12
 
 SEMANTICS: dict[str, str] = {
     "dafc_unknowns": "total contact forces f_c; membership does not depend on the stationary solution",
@@ -104,6 +113,71 @@ class _VertexCache:
     certs: list[tuple[Array, Array, int]]  # per vertex: pinv(A_act^T) (k_act, L_c), A_act^T (L_c, k_act), #ub rows
 
 
+class _RhsBases:
+    """Certified optimal bases of ``min c^T x  s.t.  A x <= b,  lb <= x <= ub`` where only ``b``
+    changes between solves (the redundancy LPs of one oracle, solved cold per direction).
+
+    The bounds are rows too: ``Abar x <= bbar`` with ``Abar = [A; -I_lb; I_ub]`` (finite bounds
+    only). A basis is a set ``I`` of ``n`` rows with ``Abar_I`` invertible whose multipliers
+    ``y_I = -Abar_I^{-T} c`` all exceed :data:`BASIS_DUAL_MIN` ``max(1, |c|)``: ``y`` does not depend
+    on ``b``, so for a new ``b`` the point ``x = Abar_I^{-1} bbar_I``, when it satisfies every row
+    (to :data:`BASIS_PRIMAL_TOL`), is optimal (``c^T x' >= -y^T Abar x' >= -y^T bbar = c^T x``
+    for every feasible ``x'``), and it is the only optimum (every optimum meets the rows of ``I``,
+    where ``y > 0``, with equality), so a cold LP returns the same point: the answer does not
+    depend on which earlier direction left the basis. Bases are harvested from optimal LP
+    results (:meth:`harvest`); degenerate ones (a zero multiplier) are not kept."""
+
+    def __init__(self, c: Array, A: Array, lb: Array, ub: Array):
+        n = A.shape[1]
+        lo, up = np.isfinite(lb), np.isfinite(ub)
+        I = np.eye(n)
+        self.c = c  # (n,)
+        self.m = A.shape[0]
+        self.Abar = np.vstack([A, -I[lo], I[up]])  # (m + #lb + #ub, n)
+        self.fixed = np.r_[-lb[lo], ub[up]]  # right-hand sides of the bound rows
+        self._lo, self._up = np.flatnonzero(lo), np.flatnonzero(up)
+        self.bases: list[tuple[Array, Array]] = []  # (I (n,), Abar_I^{-1} (n, n))
+        self.hits = 0
+
+    def solve(self, b: Array) -> Array | None:
+        """The unique optimum for the inequality right-hand side ``b`` from a kept basis, or None."""
+        bbar = np.r_[b, self.fixed]  # (m + #lb + #ub,)
+        tol = BASIS_PRIMAL_TOL * max(1.0, float(np.max(np.abs(bbar), initial=0.0)))
+        for k, (rows, inv) in enumerate(self.bases):
+            x = inv @ bbar[rows]  # (n,)
+            if bool(np.all(self.Abar @ x <= bbar + tol)):
+                if k:  # the last basis used first: neighbouring directions share their basis
+                    self.bases.insert(0, self.bases.pop(k))
+                self.hits += 1
+                return x
+        return None
+
+    def harvest(self, res: LPResult) -> None:
+        """Keep the basis of the optimal result ``res`` when its multipliers certify it (above)."""
+        if len(self.bases) >= BASES_KEPT or res.y_ub is None or res.z is None:
+            return
+        n = self.Abar.shape[1]
+        # multipliers of Abar's rows: y_ub, then -z at lower bounds, z at upper bounds
+        y = np.r_[res.y_ub, -res.z[self._lo], res.z[self._up]]
+        floor = BASIS_DUAL_MIN * max(1.0, float(np.max(np.abs(self.c), initial=0.0)))
+        rows = np.flatnonzero(y > floor)
+        if len(rows) != n:
+            return  # degenerate (or not a vertex): several optima possible, the LP decides
+        A_I = self.Abar[rows]  # (n, n)
+        try:
+            inv = np.linalg.inv(A_I)
+        except np.linalg.LinAlgError:
+            return
+        if not np.all(np.isfinite(inv)) or np.linalg.cond(A_I) > 1e10:
+            return
+        y_I = -(inv.T @ self.c)  # (n,) recomputed from the basis itself
+        if float(np.min(y_I)) <= floor or float(np.max(np.abs(A_I.T @ y_I + self.c))) > 1e-12 * max(
+                1.0, float(np.max(np.abs(self.c)))):
+            return
+        if not any(np.array_equal(rows, r) for r, _ in self.bases):
+            self.bases.append((rows, inv))
+
+
 class DAFCOracle:
     """Exact LP membership test of eq. (22) for one combination."""
 
@@ -123,6 +197,9 @@ class DAFCOracle:
         self._redundancy: LPModel | None = None
         self._relaxed: LPModel | None = None
         self._aligned: LPModel | None = None  # the friction-aligned redundancy LP (_aligned_allowable)
+        # certified optimal bases of the two redundancy LPs (their right-hand sides change per direction)
+        self._redundancy_bases: _RhsBases | None = None
+        self._aligned_bases: _RhsBases | None = None
         self._G_relaxed = np.zeros((system.D, 0))
         self._d = d
         self.lp_count = 0
@@ -174,6 +251,12 @@ class DAFCOracle:
         margin = FARKAS_MARGIN * max(1.0, _norm(u))
         if self._farkas.shape[0] and float(np.min(self._farkas @ b)) < -margin:
             return None  # an earlier Farkas certificate proves B_r z <= b infeasible (no LP needed)
+        if self._redundancy_bases is None:
+            self._redundancy_bases = _RhsBases(np.ones(2 * nr), np.hstack([B_r, -B_r]), np.zeros(2 * nr),
+                                               np.full(2 * nr, np.inf))
+        x = self._redundancy_bases.solve(b)  # the LP's unique optimum from a certified basis
+        if x is not None:
+            return x[:nr] - x[nr:]
         if self._redundancy is None:
             self._redundancy = LPModel(2 * nr, A_ub=np.hstack([B_r, -B_r]), b_ub=b, lb=0.0)
         else:
@@ -184,6 +267,7 @@ class DAFCOracle:
             self._harvest_farkas(b, margin)
             return None
         assert res.x is not None
+        self._redundancy_bases.harvest(res)
         return res.x[:nr] - res.x[nr:]
 
     def _harvest_farkas(self, b: Array, margin: float) -> None:
@@ -266,10 +350,12 @@ class DAFCOracle:
         res = model.solve(self._G_relaxed.T @ dr, maximize=True)
         self.lp_count += 1
         if res.status == "infeasible":
+            self._vertices[_RELAXED_KEY] = None  # its rows do not depend on dr: infeasible for every one
             return -np.inf
         if res.status != "optimal":  # the grip bound bounds every force
             raise SolverError("HiGHS", f"relaxed DAFC LP ended '{res.status}' although its forces are bounded")
         assert res.objective is not None and res.x is not None
+        self._keep_vertex(_RELAXED_KEY, model, res.x)
         if self._relaxed_W.shape[1] < RELAXED_POINTS:
             w = self._G_relaxed @ res.x  # (D,) the maximiser's wrench, units of F0
             if not np.any(np.all(np.abs(self._relaxed_W - w[:, None]) <= 1e-12, axis=0)):
@@ -283,13 +369,18 @@ class DAFCOracle:
         not depend on ``dr``), so its work along ``dr`` bounds the supremum from below. When that
         bound exceeds the threshold by a margin (:data:`RELAXED_MARGIN` x the force scale per unit
         motion, far above the LP tolerances' effect on the work) the answer is yes, exactly as the
-        LP's; otherwise the LP decides."""
+        LP's. Otherwise an earlier optimal vertex of the relaxed LP whose multipliers certify it
+        optimal for ``dr`` gives the supremum itself (:meth:`_vertex_sup`, the same margin either
+        way); failing both, the LP decides."""
         sc = self.system.scales
         tol = sc.work_tol(dr)
         if self._relaxed_W.shape[1]:
             lower = float(np.max(dr @ self._relaxed_W)) * sc.force + float(dr @ self.system.w_ex)
             if lower > tol + RELAXED_MARGIN * sc.force * sc.motion_size(dr):
                 return True
+        known = self._vertex_sup(_RELAXED_KEY, self._G_relaxed.T @ dr, dr)
+        if known is not None:
+            return known[0] > tol
         return self.relaxed_work_sup(dr) > tol
 
     def _force_lp(self) -> LPModel:
@@ -526,6 +617,10 @@ class DAFCOracle:
                 candidates = [z0]
         last: DirectionTest | None = None
         work_tol = sc.work_tol(dr)
+        # planar: the force LP depends on the motion through the slip signs only
+        # (:meth:`_planar_friction`), so candidates of one sign pattern share its answer
+        planar = self._d == 2 and bool(self.sel.s_index)
+        answered: dict[bytes, tuple[float, Array | None]] = {}
         for zr in candidates:
             zc = ms.zeta_c(u, zr)
             n_zc = _norm(zc)
@@ -541,7 +636,16 @@ class DAFCOracle:
                     last = DirectionTest(dr, u, zc, False, np.nan,
                                          f"S-point {still[0]} does not slide for this motion", self.exact)
                     continue
-            sup, f = self.work_sup(dr, zc, witness)
+            if planar:
+                key = self._planar_friction(zc)[2]
+                if key in answered:
+                    sup, f = answered[key]
+                else:
+                    sup, f = self.work_sup(dr, zc, witness)
+                    if not np.isnan(sup):  # an undecided LP is tried again (HiGHS' defaults) for the next
+                        answered[key] = (sup, f)
+            else:
+                sup, f = self.work_sup(dr, zc, witness)
             if np.isnan(sup):
                 last = DirectionTest(dr, u, zc, False, np.nan, "degenerate: the force LP is numerically undecided",
                                      False)
@@ -569,22 +673,33 @@ class DAFCOracle:
         B_u, B_r = self.B[:, :a_bar], self.B[:, a_bar:]
         tol = ALLOW_TOL * max(1.0, float(np.linalg.norm(u)))
         b_ub = np.concatenate([goal, -goal, -(B_u @ u) + tol])
-        if self._aligned is None:
+        cost = np.r_[np.zeros(nr), np.ones(k)]
+        if self._aligned_bases is None:
             # the rows depend on the combination only: one model per oracle, only b_ub changes
             I = np.eye(k)
             A_ub = np.vstack([np.hstack([Pr, -I]), np.hstack([-Pr, -I]),
                               np.hstack([B_r, np.zeros((B_r.shape[0], k))])])  # (2 k + #D, r + k)
-            self._aligned = LPModel(nr + k, A_ub=A_ub, b_ub=b_ub, lb=np.r_[np.full(nr, -np.inf), np.zeros(k)])
+            self._aligned_bases = _RhsBases(cost, A_ub, np.r_[np.full(nr, -np.inf), np.zeros(k)],
+                                            np.full(nr + k, np.inf))
+        x = self._aligned_bases.solve(b_ub)  # the LP's unique optimum from a certified basis
+        if x is not None:
+            return x[:nr]
+        if self._aligned is None:
+            bb = self._aligned_bases
+            self._aligned = LPModel(nr + k, A_ub=bb.Abar[:bb.m], b_ub=b_ub, lb=np.r_[np.full(nr, -np.inf), np.zeros(k)])
         else:
             self._aligned.set_ub_rhs(b_ub)
         try:
             # solved cold: the redundancy chosen for a direction does not depend on earlier ones
-            res = self._aligned.solve_cold(np.r_[np.zeros(nr), np.ones(k)])
+            res = self._aligned.solve_cold(cost)
         except SolverError:
             self._aligned = None  # leave no half-solved model for the next direction
             return None  # one candidate fewer; the others are still tried
         self.lp_count += 1
-        return None if res.x is None else res.x[:nr]
+        if res.x is None:
+            return None
+        self._aligned_bases.harvest(res)
+        return res.x[:nr]
 
     def _alternative_redundancies(self, u: Array, z0: Array, count: int = 4) -> list[Array]:
         """Every alternative of :meth:`_iter_alternatives`, as a list."""

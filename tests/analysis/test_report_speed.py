@@ -293,3 +293,53 @@ def test_realisable_direction_nlp_only_when_the_example_direction_has_no_torque_
     assert calls == ["DFDFS"]
     assert rep.torque is None and rep.torque_error is not None
     assert rep.torque_error.endswith("(and 3 other DAFC directions tried)")
+
+
+def test_certified_bases_give_the_cold_lp_optimum() -> None:
+    # min c^T x, A x <= b, x >= 0 with b changing: a kept basis answers only when its point is the
+    # LP's unique optimum; compare with scipy's LP on every right-hand side, reused or not
+    from scipy.optimize import linprog
+
+    from analysis.dafc import _RhsBases
+    from analysis.solvers.highs import LPModel
+
+    rng = np.random.default_rng(23)
+    reused = 0
+    for _ in range(5):
+        n, m = 4, 6
+        A = rng.standard_normal((m, n))
+        c = rng.random(n) + 0.1
+        bases = _RhsBases(c, A, np.zeros(n), np.full(n, np.inf))
+        model = LPModel(n, A_ub=A, b_ub=np.zeros(m), lb=0.0)
+        b0 = rng.standard_normal(m)
+        for _ in range(60):
+            b = b0 + 0.3 * rng.standard_normal(m)
+            ref = linprog(c, A_ub=A, b_ub=b, bounds=(0, None), method="highs")
+            x = bases.solve(b)
+            if x is not None:
+                reused += 1
+                assert ref.status == 0
+                np.testing.assert_allclose(x, ref.x, rtol=0, atol=1e-9)
+                continue
+            model.set_ub_rhs(b)
+            res = model.solve_cold(c)
+            assert (res.status == "optimal") == (ref.status == 0)
+            if res.status == "optimal":
+                bases.harvest(res)
+    assert reused > 50
+
+
+def test_degenerate_optimum_is_not_kept_as_a_basis() -> None:
+    # min x1 + x2 s.t. x1 + x2 >= 1, x >= 0: every point of the segment is optimal (a zero
+    # multiplier at the vertex), so no basis may answer for another right-hand side
+    from analysis.dafc import _RhsBases
+    from analysis.solvers.highs import LPModel
+
+    A = np.array([[-1.0, -1.0]])
+    c = np.ones(2)
+    bases = _RhsBases(c, A, np.zeros(2), np.full(2, np.inf))
+    model = LPModel(2, A_ub=A, b_ub=np.array([-1.0]), lb=0.0)
+    res = model.solve_cold(c)
+    assert res.status == "optimal"
+    bases.harvest(res)
+    assert bases.bases == [] and bases.solve(np.array([-2.0])) is None
