@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import heapq
 import math
+import weakref
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -35,7 +36,7 @@ from analysis.exceptions import SolverError
 from analysis.friction import FrictionSet, kinetic_friction
 from analysis.linalg import rank
 from analysis.motion import NULL_ROW_TOL, MotionSpace
-from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, snap
+from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, WORK_TOL, snap
 from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators
 from analysis.solvers.highs import LPModel, LPResult
 from analysis.statics import Statics
@@ -102,7 +103,7 @@ class DirectionTest:
     forces: Array | None = None  # (L_c,) a maximiser of the work (None when unbounded)
 
     def __post_init__(self) -> None:
-        assert abs(float(np.linalg.norm(self.direction)) - 1.0) < 1e-6 or not self.member
+        assert not self.member or abs(_norm(self.direction) - 1.0) < 1e-6
 
 
 @dataclass
@@ -402,6 +403,11 @@ class DAFCOracle:
 
     def work_sup(self, dr: Array, zeta_c: Array, witness: bool = True) -> tuple[float, Array | None]:
         """``sup dr^T (G_c f + w_s + w_ex)`` over the admissible forces for the motion ``zeta_c``."""
+        return self._work_sup(dr, zeta_c, witness)
+
+    def _work_sup(self, dr: Array, zeta_c: Array, witness: bool,
+                  planar: tuple[Array, Array, bytes] | None = None) -> tuple[float, Array | None]:
+        """:meth:`work_sup`; ``planar``: the motion's :meth:`_planar_friction`, when known."""
         st = self.st
         w_ex = self.system.w_ex
         if st.G_c.shape[1] == 0:  # no contact carries force (all D): only w_ex can do work
@@ -411,7 +417,7 @@ class DAFCOracle:
             G_eff = st.G_c
             key = b""
         elif self._d == 2:
-            G_eff, E, key = self._planar_friction(zeta_c)
+            G_eff, E, key = self._planar_friction(zeta_c) if planar is None else planar
         else:
             G_eff = st.G_c + kinetic_friction(self.system, self.sel, self.slips_of(zeta_c)).G_w
             key = G_eff[:, self._s_cols].tobytes()  # the LP's rows and objective map depend on these only
@@ -447,14 +453,15 @@ class DAFCOracle:
         f = res.x * self.system.scales.force
         return float(G_eff.T @ dr @ f + dr @ w_ex), f
 
-    def _planar_friction(self, zeta_c: Array) -> tuple[Array, Array, bytes]:
+    def _planar_friction(self, zeta_c: Array, slips: Array | None = None) -> tuple[Array, Array, bytes]:
         """``G_eff = G_c + G_w`` (eq. 12) of a planar motion, its S columns of the passive equalities
         ``E = Xi^T G_eff[:, S]`` ``(p, #S)`` and its key: the sign pattern of the slips along the
         tangents. In 2-D an S-point's slip is tangential (the motion space keeps its normal velocity
         zero; the null-space basis leaves ~1e-12 of normal component), so its unit slip is exactly
         ``+-t``: the force LP depends on the motion through these signs only, and one set of rows
         (with its certified vertices, :meth:`_vertex_sup`) serves every motion of a pattern."""
-        sig = np.where(np.einsum("kd,kd->k", self.slips_of(zeta_c), self._T_s) >= 0.0, 1.0, -1.0)  # (#S,)
+        sl = self.slips_of(zeta_c) if slips is None else slips  # (#S, 2)
+        sig = np.where((sl * self._T_s).sum(axis=1) >= 0.0, 1.0, -1.0)  # (#S,)
         key = sig.tobytes()
         known = self._pattern_G.get(key)
         if known is None:
@@ -511,18 +518,19 @@ class DAFCOracle:
             self.vertex_hits += 1
             return -np.inf, None
         vals = cache.X @ c  # (k,)
-        j = int(np.argmax(vals))
+        j = int(vals.argmax())
         M, AT, n_ub = cache.certs[j]
         y = M @ c  # (k_act,)
-        scale = VERTEX_DUAL_TOL * max(1.0, float(np.max(np.abs(c), initial=0.0)))
-        if float(np.min(y[:n_ub], initial=0.0)) < -scale or float(np.max(np.abs(AT @ y - c))) > scale:
+        scale = VERTEX_DUAL_TOL * max(1.0, float(np.abs(c).max()) if c.size else 0.0)
+        if (n_ub and float(y[:n_ub].min()) < -scale) or float(np.abs(AT @ y - c).max()) > scale:
             return None
         x = cache.X[j]
         f = x * sy.scales.force
         sup = float(c @ f + dr @ sy.w_ex)
         sc = sy.scales
-        if abs(sup - sc.work_tol(dr)) <= RELAXED_MARGIN * sc.force * sc.motion_size(dr):
-            return None  # too close to the threshold: the LP decides
+        size = sc.motion_size(dr)
+        if abs(sup - WORK_TOL * sc.force * size) <= RELAXED_MARGIN * sc.force * size:
+            return None  # too close to the threshold (work_tol(dr)): the LP decides
         self.vertex_hits += 1
         return sup, f
 
@@ -631,21 +639,24 @@ class DAFCOracle:
             if self.sel.s_index:
                 sl = self.slips_of(zc)
                 small = np.sqrt((sl * sl).sum(axis=1)) <= SLIP_TOL * n_zc  # (#S,) |slip| as np.linalg.norm(axis=1)
-                still = [self.sel.s_index[k] for k in np.flatnonzero(small)]
-                if still:
+                if small.any():
+                    still = self.sel.s_index[int(np.flatnonzero(small)[0])]
                     last = DirectionTest(dr, u, zc, False, np.nan,
-                                         f"S-point {still[0]} does not slide for this motion", self.exact)
+                                         f"S-point {still} does not slide for this motion", self.exact)
                     continue
-            if planar:
-                key = self._planar_friction(zc)[2]
-                if key in answered:
-                    sup, f = answered[key]
+                if planar:
+                    friction = self._planar_friction(zc, sl)
+                    key = friction[2]
+                    if key in answered:
+                        sup, f = answered[key]
+                    else:
+                        sup, f = self._work_sup(dr, zc, witness, friction)
+                        if not np.isnan(sup):  # an undecided LP is tried again (HiGHS' defaults) for the next
+                            answered[key] = (sup, f)
                 else:
-                    sup, f = self.work_sup(dr, zc, witness)
-                    if not np.isnan(sup):  # an undecided LP is tried again (HiGHS' defaults) for the next
-                        answered[key] = (sup, f)
+                    sup, f = self._work_sup(dr, zc, witness)
             else:
-                sup, f = self.work_sup(dr, zc, witness)
+                sup, f = self._work_sup(dr, zc, witness)
             if np.isnan(sup):
                 last = DirectionTest(dr, u, zc, False, np.nan, "degenerate: the force LP is numerically undecided",
                                      False)
@@ -1206,8 +1217,31 @@ def dafc_exact(oracle: DAFCOracle) -> DAFCExact | None:
     return DAFCExact(allowable_cone(ms).map(ms.Lambda_r_t), K)
 
 
+#: :func:`allowable_cone` per motion space alive (by ``id``, with a weak reference that drops the
+#: entry with its motion space): a report asks for it four times (the sample, the faces, the exact
+#: description, the table's search), each a cdd enumeration.
+_ALLOWABLE: dict[int, tuple[weakref.ref[MotionSpace], Generators]] = {}
+
+
 def allowable_cone(ms: MotionSpace) -> Generators:
-    """Generators of the allowable object motions ``A_r`` (eq. 20), in ``dzeta~`` coordinates."""
+    """Generators of the allowable object motions ``A_r`` (eq. 20), in ``dzeta~`` coordinates
+    (read-only arrays: one result per motion space, shared by its callers)."""
+    kept = _ALLOWABLE.get(id(ms))
+    if kept is not None and kept[0]() is ms:
+        return kept[1]
+    g = _allowable_cone(ms)
+    for a in (g.vertices, g.rays, g.lines):
+        a.setflags(write=False)
+    key = id(ms)
+
+    def forget(_ref: weakref.ref[MotionSpace]) -> None:
+        _ALLOWABLE.pop(key, None)
+
+    _ALLOWABLE[key] = (weakref.ref(ms, forget), g)
+    return g
+
+
+def _allowable_cone(ms: MotionSpace) -> Generators:
     if ms.a == 0:
         return Generators(np.zeros((1, ms.a_bar)), np.zeros((0, ms.a_bar)), np.zeros((0, ms.a_bar)))
     g = cone_generators(ms.B) if ms.B.shape[0] else Generators(

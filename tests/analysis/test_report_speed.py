@@ -343,3 +343,23 @@ def test_degenerate_optimum_is_not_kept_as_a_basis() -> None:
     assert res.status == "optimal"
     bases.harvest(res)
     assert bases.bases == [] and bases.solve(np.array([-2.0])) is None
+
+
+def test_allowable_cone_is_kept_per_motion_space(planar) -> None:
+    import gc
+
+    from analysis.dafc import _ALLOWABLE, _allowable_cone, allowable_cone
+
+    parts = CombinationParts.build(planar, "FDFDD")
+    other = CombinationParts.build(planar, "FDFDD")  # an equal motion space, another object
+    g = allowable_cone(parts.ms)
+    assert allowable_cone(parts.ms) is g  # kept
+    fresh = _allowable_cone(parts.ms)
+    for a, b in ((g.vertices, fresh.vertices), (g.rays, fresh.rays), (g.lines, fresh.lines)):
+        np.testing.assert_array_equal(a, b)
+        assert not a.flags.writeable  # shared: nobody may change it in place
+    assert allowable_cone(other.ms) is not g
+    key = id(parts.ms)
+    del parts
+    gc.collect()
+    assert key not in _ALLOWABLE  # dropped with its motion space
