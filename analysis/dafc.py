@@ -142,7 +142,7 @@ class _RhsBases:
 
     def solve(self, b: Array) -> Array | None:
         """The unique optimum for the inequality right-hand side ``b`` from a kept basis, or None."""
-        bbar = np.r_[b, self.fixed]  # (m + #lb + #ub,)
+        bbar = np.concatenate([b, self.fixed])  # (m + #lb + #ub,)
         tol = BASIS_PRIMAL_TOL * max(1.0, float(np.max(np.abs(bbar), initial=0.0)))
         for k, (rows, inv) in enumerate(self.bases):
             x = inv @ bbar[rows]  # (n,)
@@ -159,7 +159,7 @@ class _RhsBases:
             return
         n = self.Abar.shape[1]
         # multipliers of Abar's rows: y_ub, then -z at lower bounds, z at upper bounds
-        y = np.r_[res.y_ub, -res.z[self._lo], res.z[self._up]]
+        y = np.concatenate([res.y_ub, -res.z[self._lo], res.z[self._up]])
         floor = BASIS_DUAL_MIN * max(1.0, float(np.max(np.abs(self.c), initial=0.0)))
         rows = np.flatnonzero(y > floor)
         if len(rows) != n:
@@ -684,7 +684,7 @@ class DAFCOracle:
         B_u, B_r = self.B[:, :a_bar], self.B[:, a_bar:]
         tol = ALLOW_TOL * max(1.0, float(np.linalg.norm(u)))
         b_ub = np.concatenate([goal, -goal, -(B_u @ u) + tol])
-        cost = np.r_[np.zeros(nr), np.ones(k)]
+        cost = np.concatenate([np.zeros(nr), np.ones(k)])
         if self._aligned_bases is None:
             # the rows depend on the combination only: one model per oracle, only b_ub changes
             I = np.eye(k)
