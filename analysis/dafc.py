@@ -230,6 +230,7 @@ class DAFCOracle:
                      else np.zeros((0, d)))  # (#S, 2)
         self._pattern_G: dict[bytes, tuple[Array, Array]] = {}  # sign pattern -> (G_eff (D, L_c), E (p, #S))
         self._lp_key: bytes | None = None  # the sign pattern whose S columns the force LP holds
+        self._noise: list[Array] = []  # seeded redundancy draws (:meth:`_seeded_noise`)
 
     # -- kinematics -----------------------------------------------------------------------------
 
@@ -712,6 +713,14 @@ class DAFCOracle:
         self._aligned_bases.harvest(res)
         return res.x[:nr]
 
+    def _seeded_noise(self, count: int) -> list[Array]:
+        """The first ``count`` draws ``np.random.default_rng(0).standard_normal(r)`` (the same for
+        every direction: kept instead of seeding a generator per test)."""
+        if len(self._noise) < count:
+            rng = np.random.default_rng(0)
+            self._noise = [rng.standard_normal(self.ms.n_redundant) for _ in range(count)]
+        return self._noise[:count]
+
     def _alternative_redundancies(self, u: Array, z0: Array, count: int = 4) -> list[Array]:
         """Every alternative of :meth:`_iter_alternatives`, as a list."""
         return list(self._iter_alternatives(u, z0, count))
@@ -726,7 +735,7 @@ class DAFCOracle:
         redundancy and its opposite by least squares, then seeded random ones.
         """
         ms, sy, sel = self.ms, self.system, self.sel
-        a_bar, nr, d = ms.a_bar, ms.n_redundant, self._d
+        a_bar, d = ms.a_bar, self._d
         dr = ms.Lambda_r_t @ u
         base = self.Ps[:, :a_bar] @ u  # (d #S,) slip with zero redundancy
         Pr = self.Ps[:, a_bar:]  # (d #S, r)
@@ -748,9 +757,8 @@ class DAFCOracle:
                     break
                 z, *_ = np.linalg.lstsq(Pr, sign * scale * target / tn - base, rcond=None)
                 yield z
-            rng = np.random.default_rng(0)
-            for _ in range(count):
-                yield z0 + scale * rng.standard_normal(nr)
+            for noise in self._seeded_noise(count):
+                yield z0 + scale * noise
 
         for z in cands():
             zc = ms.zeta_c(u, z)
