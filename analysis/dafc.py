@@ -223,7 +223,7 @@ class DAFCOracle:
         # optimal vertices of the force LP per constraint data (key: the S columns of G_eff), each
         # with what certifies it optimal for another objective (:meth:`_vertex_sup`); None: infeasible
         self._vertices: dict[bytes, _VertexCache | None] = {}
-        self.vertex_hits = 0  # force LPs decided by a certified earlier vertex (no HiGHS call)
+        self.vertex_hits = 0  # force or relaxed LPs decided by a certified earlier vertex (no HiGHS call)
         # planar S-points: the unit slip is +-t (the slip is tangential: the motion space keeps the
         # normal velocity zero), so the friction columns take one of 2^#S values, one per sign pattern
         self._T_s = (np.array([system.tangents[i][0] for i in sel.s_index]).reshape(-1, d) if d == 2
