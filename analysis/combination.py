@@ -7,6 +7,8 @@
 
 from __future__ import annotations
 
+import itertools
+from collections.abc import Iterator
 from dataclasses import dataclass
 from typing import Any
 
@@ -247,41 +249,58 @@ def _list(a: Array) -> Any:
 
 def _realisable_candidates(
     parts: CombinationParts, oracle: DAFCOracle, target: Array, dset: DAFCSet | None, limit: int = 5
-) -> list[Array]:
-    """Directions to try for the default torque set when the example direction has none.
+) -> Iterator[Array]:
+    """Directions to try for the default torque set when the example direction has none, as they
+    are asked for (at most ``limit``).
 
     A DAFC direction only guarantees positive work; T also needs the net wrench in the motion
     space parallel to the motion (W_3 of eq. 30). The net wrench of the oracle's certificate
     forces is such a direction for the same forces (exactly so without S-points), so it is tried
     first; then a direction from the NLP that makes the net wrench parallel to the motion
     (:func:`analysis.torques.realisable_direction`); then sampled DAFC members, bounded work first.
+
+    The oracle's test of ``target`` runs when this generator is created (before the torque set of
+    ``target``, whose own test it leaves warm, as when the list was built at once); the NLP and
+    the sampled members only when the directions before them had no torque set (the NLP touches
+    neither the oracle nor the torque sets tried before it, so the directions tried are the same).
     """
-    out: list[Array] = []
     t = oracle.test(target)
-    if t.member and t.forces is not None and t.zeta_c is not None:
-        W = parts.st.G_c
-        if parts.sel.s_index:
-            W = W + kinetic_friction(parts.system, parts.sel, oracle.slips_of(t.zeta_c)).G_w
-        w = W @ t.forces + parts.system.w_ex
-        k = parts.ms.Lambda_r_t @ (parts.ms.Lambda_r_t.T @ w)
-        if np.linalg.norm(k) > 1e-9:
-            out.append(k / np.linalg.norm(k))
-        if parts.sel.s_index:
+
+    def gen() -> Iterator[Array]:
+        n = 0
+        with_forces = t.member and t.forces is not None and t.zeta_c is not None
+        if with_forces:
+            assert t.forces is not None and t.zeta_c is not None
+            W = parts.st.G_c
+            if parts.sel.s_index:
+                W = W + kinetic_friction(parts.system, parts.sel, oracle.slips_of(t.zeta_c)).G_w
+            w = W @ t.forces + parts.system.w_ex
+            k = parts.ms.Lambda_r_t @ (parts.ms.Lambda_r_t.T @ w)
+            if np.linalg.norm(k) > 1e-9 and n < limit:
+                n += 1
+                yield k / np.linalg.norm(k)
+        if with_forces and parts.sel.s_index and n < limit:
             try:
                 v = realisable_direction(parts.system, parts.sel, parts.ms, parts.st, parts.fs, t)
             except CTPError:
                 v = None
             if v is not None:
-                out.append(v)
-    if dset is not None:
-        # bounded work first (largest first): an unbounded supremum often means the net wrench
-        # can grow without being parallel to the motion, which T (W_3) excludes
-        finite = [j for j in np.argsort(-np.nan_to_num(dset.work, posinf=-1.0)) if dset.member[j]
-                  and np.isfinite(dset.work[j])]
-        unbounded = [j for j in range(len(dset.member)) if dset.member[j] and not np.isfinite(dset.work[j])]
-        stride = max(1, len(unbounded) // max(1, limit - len(out) - len(finite)))
-        out.extend(dset.directions[j] for j in finite + unbounded[::stride])
-    return out[:limit]
+                n += 1
+                yield v
+        if dset is not None:
+            # bounded work first (largest first): an unbounded supremum often means the net wrench
+            # can grow without being parallel to the motion, which T (W_3) excludes
+            finite = [j for j in np.argsort(-np.nan_to_num(dset.work, posinf=-1.0)) if dset.member[j]
+                      and np.isfinite(dset.work[j])]
+            unbounded = [j for j in range(len(dset.member)) if dset.member[j] and not np.isfinite(dset.work[j])]
+            stride = max(1, len(unbounded) // max(1, limit - n - len(finite)))
+            for j in finite + unbounded[::stride]:
+                if n >= limit:
+                    return
+                n += 1
+                yield dset.directions[j]
+
+    return gen()
 
 
 def analyze_combination(
@@ -341,18 +360,18 @@ def analyze_combination(
     elif summary.example_direction is not None:
         target = summary.example_direction
     if grasp is not None and target is not None:
-        candidates = [target]
-        if direction is None:
-            candidates += _realisable_candidates(parts, oracle, target, dset)
-        for cand in candidates:
+        others = _realisable_candidates(parts, oracle, target, dset) if direction is None else iter(())
+        tried = 0
+        for cand in itertools.chain([target], others):
+            tried += 1
             try:
                 torque = torque_set(sy, sel, ms, st, fs, grasp, cand, oracle=oracle)
                 err = None
                 break
             except CTPError as e:
                 err = err or f"direction {np.round(cand, 4).tolist()}: {e}"
-        if torque is None and len(candidates) > 1:
-            err = f"{err} (and {len(candidates) - 1} other DAFC directions tried)"
+        if torque is None and tried > 1:
+            err = f"{err} (and {tried - 1} other DAFC directions tried)"
     elif target is not None:
         err = "no stationary grasp (18): the torque set is not defined"
     if torque is not None and nu is not None:

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import heapq
 import math
+import weakref
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
@@ -35,9 +36,9 @@ from analysis.exceptions import SolverError
 from analysis.friction import FrictionSet, kinetic_friction
 from analysis.linalg import rank
 from analysis.motion import NULL_ROW_TOL, MotionSpace
-from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, snap
+from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, WORK_TOL, snap
 from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators
-from analysis.solvers.highs import LPModel
+from analysis.solvers.highs import LPModel, LPResult
 from analysis.statics import Statics
 from analysis.torque_conditions import torque_conditions
 
@@ -61,6 +62,15 @@ FARKAS_MARGIN = 1e-6
 VERTEX_POINTS = 48
 VERTEX_ACTIVE_TOL = 1e-9
 VERTEX_DUAL_TOL = 1e-12
+#: The key of the relaxed LP's vertices among the force LP's (:meth:`DAFCOracle._vertex_sup`; the
+#: force LP's keys are empty or whole float64 arrays, never 1 byte long).
+_RELAXED_KEY = b"R"
+#: Optimal bases kept per redundancy LP (:class:`_RhsBases`), the least multiplier (relative to the
+#: objective) that makes a basis's optimum unique, and the primal slack (relative to the
+#: right-hand side) a reused basis point may have.
+BASES_KEPT = 16
+BASIS_DUAL_MIN = 1e-7
+BASIS_PRIMAL_TOL = 1e-12
 
 SEMANTICS: dict[str, str] = {
     "dafc_unknowns": "total contact forces f_c; membership does not depend on the stationary solution",
@@ -93,7 +103,7 @@ class DirectionTest:
     forces: Array | None = None  # (L_c,) a maximiser of the work (None when unbounded)
 
     def __post_init__(self) -> None:
-        assert abs(float(np.linalg.norm(self.direction)) - 1.0) < 1e-6 or not self.member
+        assert not self.member or abs(_norm(self.direction) - 1.0) < 1e-6
 
 
 @dataclass
@@ -102,6 +112,71 @@ class _VertexCache:
 
     X: Array  # (k, L_c) vertices, units of F0
     certs: list[tuple[Array, Array, int]]  # per vertex: pinv(A_act^T) (k_act, L_c), A_act^T (L_c, k_act), #ub rows
+
+
+class _RhsBases:
+    """Certified optimal bases of ``min c^T x  s.t.  A x <= b,  lb <= x <= ub`` where only ``b``
+    changes between solves (the redundancy LPs of one oracle, solved cold per direction).
+
+    The bounds are rows too: ``Abar x <= bbar`` with ``Abar = [A; -I_lb; I_ub]`` (finite bounds
+    only). A basis is a set ``I`` of ``n`` rows with ``Abar_I`` invertible whose multipliers
+    ``y_I = -Abar_I^{-T} c`` all exceed :data:`BASIS_DUAL_MIN` ``max(1, |c|)``: ``y`` does not depend
+    on ``b``, so for a new ``b`` the point ``x = Abar_I^{-1} bbar_I``, when it satisfies every row
+    (to :data:`BASIS_PRIMAL_TOL`), is optimal (``c^T x' >= -y^T Abar x' >= -y^T bbar = c^T x``
+    for every feasible ``x'``), and it is the only optimum (every optimum meets the rows of ``I``,
+    where ``y > 0``, with equality), so a cold LP returns the same point: the answer does not
+    depend on which earlier direction left the basis. Bases are harvested from optimal LP
+    results (:meth:`harvest`); degenerate ones (a zero multiplier) are not kept."""
+
+    def __init__(self, c: Array, A: Array, lb: Array, ub: Array):
+        n = A.shape[1]
+        lo, up = np.isfinite(lb), np.isfinite(ub)
+        I = np.eye(n)
+        self.c = c  # (n,)
+        self.m = A.shape[0]
+        self.Abar = np.vstack([A, -I[lo], I[up]])  # (m + #lb + #ub, n)
+        self.fixed = np.r_[-lb[lo], ub[up]]  # right-hand sides of the bound rows
+        self._lo, self._up = np.flatnonzero(lo), np.flatnonzero(up)
+        self.bases: list[tuple[Array, Array]] = []  # (I (n,), Abar_I^{-1} (n, n))
+        self.hits = 0
+
+    def solve(self, b: Array) -> Array | None:
+        """The unique optimum for the inequality right-hand side ``b`` from a kept basis, or None."""
+        bbar = np.concatenate([b, self.fixed])  # (m + #lb + #ub,)
+        tol = BASIS_PRIMAL_TOL * max(1.0, float(np.max(np.abs(bbar), initial=0.0)))
+        for k, (rows, inv) in enumerate(self.bases):
+            x = inv @ bbar[rows]  # (n,)
+            if bool(np.all(self.Abar @ x <= bbar + tol)):
+                if k:  # the last basis used first: neighbouring directions share their basis
+                    self.bases.insert(0, self.bases.pop(k))
+                self.hits += 1
+                return x
+        return None
+
+    def harvest(self, res: LPResult) -> None:
+        """Keep the basis of the optimal result ``res`` when its multipliers certify it (above)."""
+        if len(self.bases) >= BASES_KEPT or res.y_ub is None or res.z is None:
+            return
+        n = self.Abar.shape[1]
+        # multipliers of Abar's rows: y_ub, then -z at lower bounds, z at upper bounds
+        y = np.concatenate([res.y_ub, -res.z[self._lo], res.z[self._up]])
+        floor = BASIS_DUAL_MIN * max(1.0, float(np.max(np.abs(self.c), initial=0.0)))
+        rows = np.flatnonzero(y > floor)
+        if len(rows) != n:
+            return  # degenerate (or not a vertex): several optima possible, the LP decides
+        A_I = self.Abar[rows]  # (n, n)
+        try:
+            inv = np.linalg.inv(A_I)
+        except np.linalg.LinAlgError:
+            return
+        if not np.all(np.isfinite(inv)) or np.linalg.cond(A_I) > 1e10:
+            return
+        y_I = -(inv.T @ self.c)  # (n,) recomputed from the basis itself
+        if float(np.min(y_I)) <= floor or float(np.max(np.abs(A_I.T @ y_I + self.c))) > 1e-12 * max(
+                1.0, float(np.max(np.abs(self.c)))):
+            return
+        if not any(np.array_equal(rows, r) for r, _ in self.bases):
+            self.bases.append((rows, inv))
 
 
 class DAFCOracle:
@@ -123,6 +198,9 @@ class DAFCOracle:
         self._redundancy: LPModel | None = None
         self._relaxed: LPModel | None = None
         self._aligned: LPModel | None = None  # the friction-aligned redundancy LP (_aligned_allowable)
+        # certified optimal bases of the two redundancy LPs (their right-hand sides change per direction)
+        self._redundancy_bases: _RhsBases | None = None
+        self._aligned_bases: _RhsBases | None = None
         self._G_relaxed = np.zeros((system.D, 0))
         self._d = d
         self.lp_count = 0
@@ -145,7 +223,14 @@ class DAFCOracle:
         # optimal vertices of the force LP per constraint data (key: the S columns of G_eff), each
         # with what certifies it optimal for another objective (:meth:`_vertex_sup`); None: infeasible
         self._vertices: dict[bytes, _VertexCache | None] = {}
-        self.vertex_hits = 0  # force LPs decided by a certified earlier vertex (no HiGHS call)
+        self.vertex_hits = 0  # force or relaxed LPs decided by a certified earlier vertex (no HiGHS call)
+        # planar S-points: the unit slip is +-t (the slip is tangential: the motion space keeps the
+        # normal velocity zero), so the friction columns take one of 2^#S values, one per sign pattern
+        self._T_s = (np.array([system.tangents[i][0] for i in sel.s_index]).reshape(-1, d) if d == 2
+                     else np.zeros((0, d)))  # (#S, 2)
+        self._pattern_G: dict[bytes, tuple[Array, Array]] = {}  # sign pattern -> (G_eff (D, L_c), E (p, #S))
+        self._lp_key: bytes | None = None  # the sign pattern whose S columns the force LP holds
+        self._noise: list[Array] = []  # seeded redundancy draws (:meth:`_seeded_noise`)
 
     # -- kinematics -----------------------------------------------------------------------------
 
@@ -168,6 +253,12 @@ class DAFCOracle:
         margin = FARKAS_MARGIN * max(1.0, _norm(u))
         if self._farkas.shape[0] and float(np.min(self._farkas @ b)) < -margin:
             return None  # an earlier Farkas certificate proves B_r z <= b infeasible (no LP needed)
+        if self._redundancy_bases is None:
+            self._redundancy_bases = _RhsBases(np.ones(2 * nr), np.hstack([B_r, -B_r]), np.zeros(2 * nr),
+                                               np.full(2 * nr, np.inf))
+        x = self._redundancy_bases.solve(b)  # the LP's unique optimum from a certified basis
+        if x is not None:
+            return x[:nr] - x[nr:]
         if self._redundancy is None:
             self._redundancy = LPModel(2 * nr, A_ub=np.hstack([B_r, -B_r]), b_ub=b, lb=0.0)
         else:
@@ -178,6 +269,7 @@ class DAFCOracle:
             self._harvest_farkas(b, margin)
             return None
         assert res.x is not None
+        self._redundancy_bases.harvest(res)
         return res.x[:nr] - res.x[nr:]
 
     def _harvest_farkas(self, b: Array, margin: float) -> None:
@@ -260,10 +352,12 @@ class DAFCOracle:
         res = model.solve(self._G_relaxed.T @ dr, maximize=True)
         self.lp_count += 1
         if res.status == "infeasible":
+            self._vertices[_RELAXED_KEY] = None  # its rows do not depend on dr: infeasible for every one
             return -np.inf
         if res.status != "optimal":  # the grip bound bounds every force
             raise SolverError("HiGHS", f"relaxed DAFC LP ended '{res.status}' although its forces are bounded")
         assert res.objective is not None and res.x is not None
+        self._keep_vertex(_RELAXED_KEY, model, res.x)
         if self._relaxed_W.shape[1] < RELAXED_POINTS:
             w = self._G_relaxed @ res.x  # (D,) the maximiser's wrench, units of F0
             if not np.any(np.all(np.abs(self._relaxed_W - w[:, None]) <= 1e-12, axis=0)):
@@ -277,13 +371,18 @@ class DAFCOracle:
         not depend on ``dr``), so its work along ``dr`` bounds the supremum from below. When that
         bound exceeds the threshold by a margin (:data:`RELAXED_MARGIN` x the force scale per unit
         motion, far above the LP tolerances' effect on the work) the answer is yes, exactly as the
-        LP's; otherwise the LP decides."""
+        LP's. Otherwise an earlier optimal vertex of the relaxed LP whose multipliers certify it
+        optimal for ``dr`` gives the supremum itself (:meth:`_vertex_sup`, the same margin either
+        way); failing both, the LP decides."""
         sc = self.system.scales
         tol = sc.work_tol(dr)
         if self._relaxed_W.shape[1]:
             lower = float(np.max(dr @ self._relaxed_W)) * sc.force + float(dr @ self.system.w_ex)
             if lower > tol + RELAXED_MARGIN * sc.force * sc.motion_size(dr):
                 return True
+        known = self._vertex_sup(_RELAXED_KEY, self._G_relaxed.T @ dr, dr)
+        if known is not None:
+            return known[0] > tol
         return self.relaxed_work_sup(dr) > tol
 
     def _force_lp(self) -> LPModel:
@@ -305,28 +404,37 @@ class DAFCOracle:
 
     def work_sup(self, dr: Array, zeta_c: Array, witness: bool = True) -> tuple[float, Array | None]:
         """``sup dr^T (G_c f + w_s + w_ex)`` over the admissible forces for the motion ``zeta_c``."""
+        return self._work_sup(dr, zeta_c, witness)
+
+    def _work_sup(self, dr: Array, zeta_c: Array, witness: bool,
+                  planar: tuple[Array, Array, bytes] | None = None) -> tuple[float, Array | None]:
+        """:meth:`work_sup`; ``planar``: the motion's :meth:`_planar_friction`, when known."""
         st = self.st
         w_ex = self.system.w_ex
         if st.G_c.shape[1] == 0:  # no contact carries force (all D): only w_ex can do work
             return float(dr @ w_ex), np.zeros(0)
+        E: Array | None = None
         if not self.sel.s_index:
-            model = self._force_lp()
             G_eff = st.G_c
             key = b""
+        elif self._d == 2:
+            G_eff, E, key = self._planar_friction(zeta_c) if planar is None else planar
         else:
             G_eff = st.G_c + kinetic_friction(self.system, self.sel, self.slips_of(zeta_c)).G_w
-            model = self._force_lp()
             key = G_eff[:, self._s_cols].tobytes()  # the LP's rows and objective map depend on these only
+        model = self._force_lp()
         c = G_eff.T @ dr  # (L_c,) work per unit force (units of F0)
         if not witness:
             known = self._vertex_sup(key, c, dr)
             if known is not None:
                 return known
-        if self.sel.s_index:
+        if self.sel.s_index and (E is None or key != self._lp_key):
             s_cols = self._s_cols
-            E = snap(self._XiT @ G_eff[:, s_cols])  # (p, #S), noise-level entries zero as in the base rows
+            if E is None:
+                E = snap(self._XiT @ G_eff[:, s_cols])  # (p, #S), noise-level entries zero as in the base rows
             rows, cols = np.indices(E.shape)
             model.change_coefficients(rows.ravel() + model.n_ub, s_cols[cols.ravel()], E.ravel())
+            self._lp_key = key if self._d == 2 else None
         try:
             res = model.solve(c, maximize=True)
         except SolverError:
@@ -345,6 +453,23 @@ class DAFCOracle:
         self._keep_vertex(key, model, res.x)
         f = res.x * self.system.scales.force
         return float(G_eff.T @ dr @ f + dr @ w_ex), f
+
+    def _planar_friction(self, zeta_c: Array, slips: Array | None = None) -> tuple[Array, Array, bytes]:
+        """``G_eff = G_c + G_w`` (eq. 12) of a planar motion, its S columns of the passive equalities
+        ``E = Xi^T G_eff[:, S]`` ``(p, #S)`` and its key: the sign pattern of the slips along the
+        tangents. In 2-D an S-point's slip is tangential (the motion space keeps its normal velocity
+        zero; the null-space basis leaves ~1e-12 of normal component), so its unit slip is exactly
+        ``+-t``: the force LP depends on the motion through these signs only, and one set of rows
+        (with its certified vertices, :meth:`_vertex_sup`) serves every motion of a pattern."""
+        sl = self.slips_of(zeta_c) if slips is None else slips  # (#S, 2)
+        sig = np.where((sl * self._T_s).sum(axis=1) >= 0.0, 1.0, -1.0)  # (#S,)
+        key = sig.tobytes()
+        known = self._pattern_G.get(key)
+        if known is None:
+            G_eff = self.st.G_c + kinetic_friction(self.system, self.sel, sig[:, None] * self._T_s).G_w  # (D, L_c)
+            known = G_eff, snap(self._XiT @ G_eff[:, self._s_cols])
+            self._pattern_G[key] = known
+        return known[0], known[1], key
 
     def _keep_vertex(self, key: bytes, model: LPModel, x: Array) -> None:
         """Store the force LP's optimal point ``x`` (units of F0) for the rows ``key`` with the
@@ -394,18 +519,19 @@ class DAFCOracle:
             self.vertex_hits += 1
             return -np.inf, None
         vals = cache.X @ c  # (k,)
-        j = int(np.argmax(vals))
+        j = int(vals.argmax())
         M, AT, n_ub = cache.certs[j]
         y = M @ c  # (k_act,)
-        scale = VERTEX_DUAL_TOL * max(1.0, float(np.max(np.abs(c), initial=0.0)))
-        if float(np.min(y[:n_ub], initial=0.0)) < -scale or float(np.max(np.abs(AT @ y - c))) > scale:
+        scale = VERTEX_DUAL_TOL * max(1.0, float(np.abs(c).max()) if c.size else 0.0)
+        if (n_ub and float(y[:n_ub].min()) < -scale) or float(np.abs(AT @ y - c).max()) > scale:
             return None
         x = cache.X[j]
         f = x * sy.scales.force
         sup = float(c @ f + dr @ sy.w_ex)
         sc = sy.scales
-        if abs(sup - sc.work_tol(dr)) <= RELAXED_MARGIN * sc.force * sc.motion_size(dr):
-            return None  # too close to the threshold: the LP decides
+        size = sc.motion_size(dr)
+        if abs(sup - WORK_TOL * sc.force * size) <= RELAXED_MARGIN * sc.force * size:
+            return None  # too close to the threshold (work_tol(dr)): the LP decides
         self.vertex_hits += 1
         return sup, f
 
@@ -500,6 +626,10 @@ class DAFCOracle:
                 candidates = [z0]
         last: DirectionTest | None = None
         work_tol = sc.work_tol(dr)
+        # planar: the force LP depends on the motion through the slip signs only
+        # (:meth:`_planar_friction`), so candidates of one sign pattern share its answer
+        planar = self._d == 2 and bool(self.sel.s_index)
+        answered: dict[bytes, tuple[float, Array | None]] = {}
         for zr in candidates:
             zc = ms.zeta_c(u, zr)
             n_zc = _norm(zc)
@@ -510,12 +640,24 @@ class DAFCOracle:
             if self.sel.s_index:
                 sl = self.slips_of(zc)
                 small = np.sqrt((sl * sl).sum(axis=1)) <= SLIP_TOL * n_zc  # (#S,) |slip| as np.linalg.norm(axis=1)
-                still = [self.sel.s_index[k] for k in np.flatnonzero(small)]
-                if still:
+                if small.any():
+                    still = self.sel.s_index[int(np.flatnonzero(small)[0])]
                     last = DirectionTest(dr, u, zc, False, np.nan,
-                                         f"S-point {still[0]} does not slide for this motion", self.exact)
+                                         f"S-point {still} does not slide for this motion", self.exact)
                     continue
-            sup, f = self.work_sup(dr, zc, witness)
+                if planar:
+                    friction = self._planar_friction(zc, sl)
+                    key = friction[2]
+                    if key in answered:
+                        sup, f = answered[key]
+                    else:
+                        sup, f = self._work_sup(dr, zc, witness, friction)
+                        if not np.isnan(sup):  # an undecided LP is tried again (HiGHS' defaults) for the next
+                            answered[key] = (sup, f)
+                else:
+                    sup, f = self._work_sup(dr, zc, witness)
+            else:
+                sup, f = self._work_sup(dr, zc, witness)
             if np.isnan(sup):
                 last = DirectionTest(dr, u, zc, False, np.nan, "degenerate: the force LP is numerically undecided",
                                      False)
@@ -543,22 +685,41 @@ class DAFCOracle:
         B_u, B_r = self.B[:, :a_bar], self.B[:, a_bar:]
         tol = ALLOW_TOL * max(1.0, float(np.linalg.norm(u)))
         b_ub = np.concatenate([goal, -goal, -(B_u @ u) + tol])
-        if self._aligned is None:
+        cost = np.concatenate([np.zeros(nr), np.ones(k)])
+        if self._aligned_bases is None:
             # the rows depend on the combination only: one model per oracle, only b_ub changes
             I = np.eye(k)
             A_ub = np.vstack([np.hstack([Pr, -I]), np.hstack([-Pr, -I]),
                               np.hstack([B_r, np.zeros((B_r.shape[0], k))])])  # (2 k + #D, r + k)
-            self._aligned = LPModel(nr + k, A_ub=A_ub, b_ub=b_ub, lb=np.r_[np.full(nr, -np.inf), np.zeros(k)])
+            self._aligned_bases = _RhsBases(cost, A_ub, np.r_[np.full(nr, -np.inf), np.zeros(k)],
+                                            np.full(nr + k, np.inf))
+        x = self._aligned_bases.solve(b_ub)  # the LP's unique optimum from a certified basis
+        if x is not None:
+            return x[:nr]
+        if self._aligned is None:
+            bb = self._aligned_bases
+            self._aligned = LPModel(nr + k, A_ub=bb.Abar[:bb.m], b_ub=b_ub, lb=np.r_[np.full(nr, -np.inf), np.zeros(k)])
         else:
             self._aligned.set_ub_rhs(b_ub)
         try:
             # solved cold: the redundancy chosen for a direction does not depend on earlier ones
-            res = self._aligned.solve_cold(np.r_[np.zeros(nr), np.ones(k)])
+            res = self._aligned.solve_cold(cost)
         except SolverError:
             self._aligned = None  # leave no half-solved model for the next direction
             return None  # one candidate fewer; the others are still tried
         self.lp_count += 1
-        return None if res.x is None else res.x[:nr]
+        if res.x is None:
+            return None
+        self._aligned_bases.harvest(res)
+        return res.x[:nr]
+
+    def _seeded_noise(self, count: int) -> list[Array]:
+        """The first ``count`` draws ``np.random.default_rng(0).standard_normal(r)`` (the same for
+        every direction: kept instead of seeding a generator per test)."""
+        if len(self._noise) < count:
+            rng = np.random.default_rng(0)
+            self._noise = [rng.standard_normal(self.ms.n_redundant) for _ in range(count)]
+        return self._noise[:count]
 
     def _alternative_redundancies(self, u: Array, z0: Array, count: int = 4) -> list[Array]:
         """Every alternative of :meth:`_iter_alternatives`, as a list."""
@@ -574,7 +735,7 @@ class DAFCOracle:
         redundancy and its opposite by least squares, then seeded random ones.
         """
         ms, sy, sel = self.ms, self.system, self.sel
-        a_bar, nr, d = ms.a_bar, ms.n_redundant, self._d
+        a_bar, d = ms.a_bar, self._d
         dr = ms.Lambda_r_t @ u
         base = self.Ps[:, :a_bar] @ u  # (d #S,) slip with zero redundancy
         Pr = self.Ps[:, a_bar:]  # (d #S, r)
@@ -596,9 +757,8 @@ class DAFCOracle:
                     break
                 z, *_ = np.linalg.lstsq(Pr, sign * scale * target / tn - base, rcond=None)
                 yield z
-            rng = np.random.default_rng(0)
-            for _ in range(count):
-                yield z0 + scale * rng.standard_normal(nr)
+            for noise in self._seeded_noise(count):
+                yield z0 + scale * noise
 
         for z in cands():
             zc = ms.zeta_c(u, z)
@@ -1065,8 +1225,31 @@ def dafc_exact(oracle: DAFCOracle) -> DAFCExact | None:
     return DAFCExact(allowable_cone(ms).map(ms.Lambda_r_t), K)
 
 
+#: :func:`allowable_cone` per motion space alive (by ``id``, with a weak reference that drops the
+#: entry with its motion space): a report asks for it four times (the sample, the faces, the exact
+#: description, the table's search), each a cdd enumeration.
+_ALLOWABLE: dict[int, tuple[weakref.ref[MotionSpace], Generators]] = {}
+
+
 def allowable_cone(ms: MotionSpace) -> Generators:
-    """Generators of the allowable object motions ``A_r`` (eq. 20), in ``dzeta~`` coordinates."""
+    """Generators of the allowable object motions ``A_r`` (eq. 20), in ``dzeta~`` coordinates
+    (read-only arrays: one result per motion space, shared by its callers)."""
+    kept = _ALLOWABLE.get(id(ms))
+    if kept is not None and kept[0]() is ms:
+        return kept[1]
+    g = _allowable_cone(ms)
+    for a in (g.vertices, g.rays, g.lines):
+        a.setflags(write=False)
+    key = id(ms)
+
+    def forget(_ref: weakref.ref[MotionSpace]) -> None:
+        _ALLOWABLE.pop(key, None)
+
+    _ALLOWABLE[key] = (weakref.ref(ms, forget), g)
+    return g
+
+
+def _allowable_cone(ms: MotionSpace) -> Generators:
     if ms.a == 0:
         return Generators(np.zeros((1, ms.a_bar)), np.zeros((0, ms.a_bar)), np.zeros((0, ms.a_bar)))
     g = cone_generators(ms.B) if ms.B.shape[0] else Generators(

@@ -1,5 +1,9 @@
 """Dependencies of the routes (``Annotated`` aliases: settings, store, workers, runner) and the
-checks every scene-taking route makes (:func:`check_scene`)."""
+checks every scene-taking route makes (:func:`check_scene`).
+
+The dependencies only read ``app.state``: they are coroutines, so FastAPI calls them in the event
+loop (a plain ``def`` dependency is sent to its thread pool: a thread round trip per dependency
+and request, about a millisecond of the server's CPU for the four of ``POST /analyses``)."""
 
 from __future__ import annotations
 
@@ -17,37 +21,37 @@ from api.store import JobStore
 from api.workers import ProcessPool
 
 
-def get_settings(request: Request) -> Settings:
+async def get_settings(request: Request) -> Settings:
     settings: Settings = request.app.state.settings
     return settings
 
 
-def get_store(request: Request) -> JobStore:
+async def get_store(request: Request) -> JobStore:
     store: JobStore = request.app.state.store
     return store
 
 
-def get_analysis_pool(request: Request) -> ProcessPool:
+async def get_analysis_pool(request: Request) -> ProcessPool:
     pool: ProcessPool = request.app.state.analysis_pool
     return pool
 
 
-def get_light_pool(request: Request) -> ProcessPool:
+async def get_light_pool(request: Request) -> ProcessPool:
     pool: ProcessPool = request.app.state.light_pool
     return pool
 
 
-def get_cache(request: Request) -> ResultCache:
+async def get_cache(request: Request) -> ResultCache:
     cache: ResultCache = request.app.state.analysis_cache
     return cache
 
 
-def get_runner(request: Request) -> JobRunner | None:
+async def get_runner(request: Request) -> JobRunner | None:
     runner: JobRunner | None = request.app.state.runner
     return runner
 
 
-def get_executor_name(request: Request) -> str:
+async def get_executor_name(request: Request) -> str:
     name: str = request.app.state.executor_name
     return name
 

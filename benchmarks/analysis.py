@@ -2,6 +2,7 @@
 
     .venv/bin/python benchmarks/analysis.py            # all figures
     .venv/bin/python benchmarks/analysis.py --quick    # skip the 3^9 enumeration
+    .venv/bin/python benchmarks/analysis.py --planar-reports [--repeat 3]   # CPU per planar report only
 
 Figures: enumeration of all 3^L combinations (feasibility + DAFC dimension) of the example
 scenes, on one core and with worker processes, with CPU seconds (robust to other load on a shared
@@ -9,6 +10,11 @@ machine) and LPs solved; the full report of one combination; the scaling with th
 contacts (the wrap scene restricted to its first L contacts); the 12-contact wrap (reports, and
 its enumeration on a seeded sample with the projection to all 3^12 combinations); the contact
 modes of the cube in five planes (20 contacts). Issue 9's targets are printed in brackets.
+
+``--planar-reports``: the CPU of the full report (``analyze_combination(...).to_json()``, default
+samples) of every one of the 243 planar combinations, mean and p95, and of the first 200 (the
+light requests of ``benchmarks/service.py --scenario mixed``, which by Little's law wait about
+20 clients x that mean / 2 workers). Best of ``--repeat`` runs per combination (one process).
 """
 
 from __future__ import annotations
@@ -120,6 +126,44 @@ def report_distribution(name: str, at_most: int | None = None) -> tuple[float, f
     return statistics.median(times), times[int(0.9 * (len(times) - 1))], times[-1], len(times)
 
 
+def planar_report_cpu(repeat: int = 1) -> dict[str, float]:
+    """CPU seconds of the full report (JSON included) of every planar combination, in the order
+    of the table (best of ``repeat`` passes over all of them). Each report starts without built
+    IPOPT solvers, as a service worker's request for a combination it has not seen does."""
+    import itertools
+
+    from analysis.solvers.casadi_nlp import _solvers
+
+    sy = build_system(load_scene(ROOT / "examples" / "planar_disk_envelope.json"))
+    combos = ["".join(c) for c in itertools.product("FSD", repeat=sy.L)]
+    analyze_combination(sy, combos[0]).to_json()  # warm-up (imports, CasADi)
+    best = {c: np.inf for c in combos}
+    for _ in range(repeat):
+        for c in combos:
+            _solvers().clear()
+            t = time.process_time()
+            analyze_combination(sy, c).to_json()
+            best[c] = min(best[c], time.process_time() - t)
+    return best
+
+
+def _mean_p95(values: list[float]) -> tuple[float, float]:
+    v = sorted(values)
+    return sum(v) / len(v), v[int(0.95 * (len(v) - 1))]
+
+
+def print_planar_reports(repeat: int) -> None:
+    cpu = planar_report_cpu(repeat)
+    every = list(cpu.values())
+    first = every[:200]
+    m, p = _mean_p95(every)
+    m2, p2 = _mean_p95(first)
+    print(f"planar_disk_envelope full report CPU (best of {repeat}), all {len(every)} combinations: mean "
+          f"{1e3 * m:.1f} ms, p95 {1e3 * p:.1f} ms, max {1e3 * max(every):.1f} ms; the first 200 (the service's "
+          f"mixed light requests): mean {1e3 * m2:.1f} ms, p95 {1e3 * p2:.1f} ms  [about 20 ms for a light p95 "
+          "under 400 ms]")
+
+
 def twelve_contact_reports() -> list[float]:
     """Wall time of the full report of 15 combinations of the 12-contact wrap (SSDDSSSDFDDF, the
     fifth random one, once aborted the process in cdd's matrix_canonicalize)."""
@@ -155,10 +199,16 @@ def scaling(max_L: int) -> list[tuple[int, int, float, int]]:
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="skip the 19,683-combination enumeration")
+    ap.add_argument("--planar-reports", action="store_true", help="only the CPU per planar full report")
+    ap.add_argument("--repeat", type=int, default=1, help="--planar-reports: passes (best per combination)")
     args = ap.parse_args()
     print(f"machine: {machine()}")
     print(f"load average before: {os.getloadavg()[0]:.2f} (other work on the machine inflates wall times; "
           "CPU seconds are robust to it)")
+    if args.planar_reports:
+        print_planar_reports(args.repeat)
+        print(f"load average after: {os.getloadavg()[0]:.2f}")
+        return
     t, f, n, c, lps = time_enum("planar_disk_envelope", workers=1, repeat=3)
     print(f"planar_disk_envelope: all {n} combinations, one core: {t:.2f} s wall, {c:.2f} s CPU, {lps} LPs "
           f"({f} feasible)")
@@ -172,6 +222,7 @@ def main() -> None:
           f"p90 {p90:.3f} s, max {mx:.3f} s")
     t, c = time_report("planar_disk_envelope", "FDFDD")
     print(f"planar_disk_envelope FDFDD full report: {t:.3f} s wall, {c:.3f} s CPU")
+    print_planar_reports(1)
     print("scaling with the number of contacts (wrap scene, first L-1 finger contacts + palm, one core):")
     for L, n, t, f in scaling(7 if args.quick else 8):
         print(f"  L = {L}: {n:5d} combinations  {t:7.2f} s  {1e3 * t / n:6.2f} ms/combination  ({f} feasible)")

@@ -10,8 +10,9 @@ stops it. Every request loop is bounded (a fixed number of requests, a time-out 
   planar example (all 243 in turn: each is computed, none is in the cache), while 2 heavy clients
   keep sending tables of every combination of ``sphere_four_finger_palm`` (each under another
   scene name, so none is a cache hit). Target: light p95 under 400 ms, 0 errors. This one is
-  bound by capacity as much as by fairness: C clients always waiting for analyses of about 40 ms
-  of CPU each on 2 cores wait about C x 40 ms / 2 on average (Little's law), 400 ms for C = 20.
+  bound by capacity as much as by fairness: C clients always waiting for analyses of c ms of CPU
+  each on 2 cores wait about C x c / 2 on average (Little's law); ``benchmarks/analysis.py
+  --planar-reports`` prints c for these combinations (the first 200 of the table).
 * ``mixed-repeat``: the same with the light requests drawn from 20 combinations (the first
   request of each is computed, the others are cache hits), as when several people look at the
   same scenes.

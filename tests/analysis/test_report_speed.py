@@ -19,6 +19,7 @@ from analysis.combination import CombinationParts, analyze_combination
 from analysis.contacts import build_system
 from analysis.dafc import _allowable_faces, _face_crossing, dafc_set, default_samples, sample_directions
 from analysis.loader import load_scene
+from analysis.scales import GRIP_BOUND
 from analysis.torques import _nlp_data
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -229,3 +230,136 @@ def test_certified_vertices_decide_as_the_force_lp(planar) -> None:
             if t.member:
                 assert oracle.certify(t)  # the stored vertex's forces pass the newton-level check
     assert hits > 20  # the shortcut was taken, so the comparison tested it
+
+
+def test_planar_force_lp_by_slip_signs_agrees_with_scipy(planar) -> None:
+    # 2-D: the force LP of a motion depends on the S-points' slip signs only (the friction columns
+    # of the exact +-t); its supremum must equal an independent LP with the motion's own slips
+    from scipy.optimize import linprog
+
+    from analysis.friction import kinetic_friction
+
+    rng = np.random.default_rng(17)
+    checked = 0
+    for comb in _SHORTCUT_COMBINATIONS:
+        parts = CombinationParts.build(planar, comb)
+        sy, sel, ms, st, fs = parts.system, parts.sel, parts.ms, parts.st, parts.fs
+        if ms.a_bar == 0 or not sel.s_index:
+            continue
+        oracle = parts.oracle()
+        F0 = sy.scales.force
+        for _ in range(40):
+            zc = rng.standard_normal(ms.a)  # (a,) any motion of the motion space
+            u = zc[:ms.a_bar]
+            dr = ms.Lambda_r_t @ (u / np.linalg.norm(u))
+            zc = zc / np.linalg.norm(u)
+            sl = oracle.slips_of(zc)  # (#S, 2)
+            if np.min(np.linalg.norm(sl, axis=1)) <= 1e-6:
+                continue
+            sup, _ = oracle.work_sup(dr, zc, witness=False)
+            G_eff = st.G_c + kinetic_friction(sy, sel, sl).G_w  # (D, L_c) this motion's own slips
+            res = linprog(-(G_eff.T @ dr), A_ub=np.vstack([fs.C, fs.N.sum(axis=0)]),
+                          b_ub=np.r_[np.zeros(fs.C.shape[0]), GRIP_BOUND * F0],
+                          A_eq=st.Xi.T @ G_eff, b_eq=-(st.Xi.T @ sy.w_ex), bounds=(None, None), method="highs")
+            if res.status == 2:
+                assert sup == -np.inf, (comb, zc)
+                continue
+            assert res.status == 0, (comb, res.message)
+            ref = -res.fun + float(dr @ sy.w_ex)
+            assert sup == pytest.approx(ref, rel=1e-7, abs=1e-7 * F0), (comb, zc)
+            checked += 1
+        assert len(oracle._pattern_G) <= 2 ** len(sel.s_index)
+    assert checked > 100
+
+
+def test_realisable_direction_nlp_only_when_the_example_direction_has_no_torque_set(planar, monkeypatch) -> None:
+    # the IPOPT search for a realisable direction is the second fallback of the default torque
+    # set: it runs only after the example direction and the certificate's wrench direction failed
+    import analysis.combination as combination
+
+    calls: list[str] = []
+    real = combination.realisable_direction
+
+    def counted(system, sel, *args, **kwargs):
+        calls.append(sel.combination)
+        return real(system, sel, *args, **kwargs)
+
+    monkeypatch.setattr(combination, "realisable_direction", counted)
+    for comb in ("FSFSS", "SFSFS"):  # S-points, and the example direction has a torque set
+        rep = analyze_combination(planar, comb)
+        assert rep.torque is not None and rep.torque_error is None
+    assert calls == []
+    rep = analyze_combination(planar, "DFDFS")  # no DAFC direction tried has a torque set
+    assert calls == ["DFDFS"]
+    assert rep.torque is None and rep.torque_error is not None
+    assert rep.torque_error.endswith("(and 3 other DAFC directions tried)")
+
+
+def test_certified_bases_give_the_cold_lp_optimum() -> None:
+    # min c^T x, A x <= b, x >= 0 with b changing: a kept basis answers only when its point is the
+    # LP's unique optimum; compare with scipy's LP on every right-hand side, reused or not
+    from scipy.optimize import linprog
+
+    from analysis.dafc import _RhsBases
+    from analysis.solvers.highs import LPModel
+
+    rng = np.random.default_rng(23)
+    reused = 0
+    for _ in range(5):
+        n, m = 4, 6
+        A = rng.standard_normal((m, n))
+        c = rng.random(n) + 0.1
+        bases = _RhsBases(c, A, np.zeros(n), np.full(n, np.inf))
+        model = LPModel(n, A_ub=A, b_ub=np.zeros(m), lb=0.0)
+        b0 = rng.standard_normal(m)
+        for _ in range(60):
+            b = b0 + 0.3 * rng.standard_normal(m)
+            ref = linprog(c, A_ub=A, b_ub=b, bounds=(0, None), method="highs")
+            x = bases.solve(b)
+            if x is not None:
+                reused += 1
+                assert ref.status == 0
+                np.testing.assert_allclose(x, ref.x, rtol=0, atol=1e-9)
+                continue
+            model.set_ub_rhs(b)
+            res = model.solve_cold(c)
+            assert (res.status == "optimal") == (ref.status == 0)
+            if res.status == "optimal":
+                bases.harvest(res)
+    assert reused > 50
+
+
+def test_degenerate_optimum_is_not_kept_as_a_basis() -> None:
+    # min x1 + x2 s.t. x1 + x2 >= 1, x >= 0: every point of the segment is optimal (a zero
+    # multiplier at the vertex), so no basis may answer for another right-hand side
+    from analysis.dafc import _RhsBases
+    from analysis.solvers.highs import LPModel
+
+    A = np.array([[-1.0, -1.0]])
+    c = np.ones(2)
+    bases = _RhsBases(c, A, np.zeros(2), np.full(2, np.inf))
+    model = LPModel(2, A_ub=A, b_ub=np.array([-1.0]), lb=0.0)
+    res = model.solve_cold(c)
+    assert res.status == "optimal"
+    bases.harvest(res)
+    assert bases.bases == [] and bases.solve(np.array([-2.0])) is None
+
+
+def test_allowable_cone_is_kept_per_motion_space(planar) -> None:
+    import gc
+
+    from analysis.dafc import _ALLOWABLE, _allowable_cone, allowable_cone
+
+    parts = CombinationParts.build(planar, "FDFDD")
+    other = CombinationParts.build(planar, "FDFDD")  # an equal motion space, another object
+    g = allowable_cone(parts.ms)
+    assert allowable_cone(parts.ms) is g  # kept
+    fresh = _allowable_cone(parts.ms)
+    for a, b in ((g.vertices, fresh.vertices), (g.rays, fresh.rays), (g.lines, fresh.lines)):
+        np.testing.assert_array_equal(a, b)
+        assert not a.flags.writeable  # shared: nobody may change it in place
+    assert allowable_cone(other.ms) is not g
+    key = id(parts.ms)
+    del parts
+    gc.collect()
+    assert key not in _ALLOWABLE  # dropped with its motion space
