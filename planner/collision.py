@@ -269,6 +269,7 @@ def _trimmed_at_base(A: Array, B: Array, base: Array, r_infl: Array) -> tuple[Ar
     A2 = np.where(at_base[:, None], A + D * (trim / np.where(L > 0, L, 1.0))[:, None], A)
     return A2, skip
 
+
 @dataclass(frozen=True)
 class _FingerData:
     """Static data of one finger for the vectorised clearance."""
@@ -281,6 +282,8 @@ class _FingerData:
     base: Array  # (dim,) base joint position
     pairs: Array  # (p, 2) own non-adjacent link pairs, then (own link, link of another checked finger)
     pair_radii: Array  # (p,) sum of the capsule radii of each pair
+    #: (p,) half the sum of the link lengths of each pair, less 1e-9 of each (at q0; links are rigid)
+    pair_half: Array
     rot_K: list[tuple[Array, Array]] | None  # serial chains: (K, K @ K) of every joint axis
     urdf: bool  # the links are URDF collision shapes (coal), radius 0
     coal_object: bool  # the object distances through coal (URDF links, or a mesh object)
@@ -518,16 +521,25 @@ class CollisionModel:
                 S0 = np.concatenate([A, *(np.broadcast_to(sg[0], (N, *sg[0].shape)) for sg in segs)], axis=1)
                 S1 = np.concatenate([B, *(np.broadcast_to(sg[1], (N, *sg[1].shape)) for sg in segs)], axis=1)
             p = len(i)
-            pd = segment_segment_distances(S0[:, i].reshape(N * p, d), S1[:, i].reshape(N * p, d),
-                                           S0[:, j].reshape(N * p, d), S1[:, j].reshape(N * p, d))
-            best = np.minimum(best, (pd.reshape(N, p) - fd.pair_radii - al[2 * n:]).min(axis=1))
+            # only the pairs whose lower bound is below the minimum so far (as _capsule_clearance_min):
+            # two segments are at least |c_a - c_b| - (L_a + L_b) / 2 apart (midpoints c, rigid links
+            # of lengths L); the others cannot hold the minimum
+            Mid = 0.5 * (S0 + S1)  # (N, n_s, d)
+            gap = Mid[:, i] - Mid[:, j]  # (N, p, d)
+            bound = np.sqrt((gap * gap).sum(axis=2)) - fd.pair_half - fd.pair_radii - al[2 * n:]  # (N, p)
+            need = (bound - 1e-9 < best[:, None]).reshape(N * p)
+            if need.any():
+                pd = np.full(N * p, np.inf)
+                pd[need] = segment_segment_distances(S0[:, i].reshape(N * p, d)[need], S1[:, i].reshape(N * p, d)[need],
+                                                     S0[:, j].reshape(N * p, d)[need], S1[:, j].reshape(N * p, d)[need])
+                best = np.minimum(best, (pd.reshape(N, p) - fd.pair_radii - al[2 * n:]).min(axis=1))
         if fd.any_fixed:  # the fixed bodies, only for the links whose lower bound is below `best`
             tiles = self._cache.get(("tiles", finger, N))
             if tiles is None:
                 tiles = self._cache[("tiles", finger, N)] = (np.tile(fd.r_infl, N), np.tile(fd.fixed_checked, N))
             r_all, fixed_checked = tiles  # (N n,) each
             A2, skip = _trimmed_at_base(Af, Bf, fd.base, r_all)
-            al_f = np.tile(al[n:2 * n], N)
+            al_f = al[n:2 * n]  # (n,), per link
             checked = fixed_checked & ~skip
             E = Bf - A2
             half = 0.5 * np.sqrt((E * E).sum(axis=1))
@@ -538,7 +550,7 @@ class CollisionModel:
                 lb = shape_signed_distances(bodies[0].shape, C, d) - half
                 for fb in bodies[1:]:
                     lb = np.minimum(lb, shape_signed_distances(fb.shape, C, d) - half)
-                need = checked & (lb - r_all - al_f - 1e-9 < np.repeat(best, n))
+                need = checked & ((lb.reshape(N, n) - fd.r_infl - al_f - 1e-9) < best[:, None]).reshape(N * n)
             if need.any():
                 # sampled as the whole block would be: the sample count from the longest link
                 length = float(2.0 * half.max())
@@ -547,7 +559,7 @@ class CollisionModel:
                     dist = np.minimum(dist, _shape_segments_distance(fb.shape, A2[need], Bf[need], d, self.sample_step,
                                                                      length))
                 fixed = np.full(N * n, np.inf)
-                fixed[need] = dist - r_all[need] - al_f[need]
+                fixed[need] = dist - r_all[need] - al_f[np.flatnonzero(need) % n]
                 best = np.minimum(best, fixed.reshape(N, n).min(axis=1))
         return np.asarray(best)
 
@@ -576,11 +588,13 @@ class CollisionModel:
         Rot = _EYE3 + S[:, :, None, None] * K[0] + C[:, :, None, None] * K[1]  # (N, n, 3, 3) joint rotations
         R = np.broadcast_to(chain.base_R, (N, 3, 3))
         p = np.broadcast_to(chain.base_p, (N, 3))
+        p = p + R @ chain.origins[0]
         for k in range(n):
-            p = p + R @ chain.origins[k]
             R = R @ Rot[:, k]
             end = chain.origins[k + 1] if k + 1 < n else chain.tip
-            A[:, k], B[:, k] = p, p + R @ end
+            A[:, k] = p
+            p = p + R @ end  # the end of link k is the origin of joint k + 1
+            B[:, k] = p
         return A[:, :, :d], B[:, :, :d]
 
     def _capsule_clearance_min(
@@ -748,6 +762,10 @@ class CollisionModel:
                     radii.append(np.array([self.radius(r) for r in self.links(j)]))
                     stacked_refs += self.links(j)
             stacked = np.concatenate(radii)
+            lengths = np.concatenate([[float(np.linalg.norm(np.subtract(*self.hand.body_segment(r, self.hand.q0))))
+                                       for r in self.links(k)] for k in [finger, *[
+                                           j for j in range(len(self.hand.fingers))
+                                           if j != finger and (min(j, finger), max(j, finger)) in self.finger_pairs]]])
             pairs = [(i, j) for i in range(n) for j in range(i + 2, n)]
             pairs += [(i, j) for i in range(n) for j in range(n, len(stacked))]
             pa = np.array(pairs, dtype=int).reshape(-1, 2)
@@ -764,6 +782,7 @@ class CollisionModel:
                 np.asarray(chain.body_pose(0, self.hand.q0[sl])[1][: self.scene.dim], dtype=float),
                 pa,
                 stacked[pa[:, 0]] + stacked[pa[:, 1]],
+                0.5 * (lengths[pa[:, 0]] + lengths[pa[:, 1]]) * (1.0 - 1e-9) if len(pa) else np.zeros(0),
                 rot_K,
                 self.is_urdf(finger),
                 self.is_urdf(finger) or isinstance(self.scene.object.shape, Mesh),

@@ -86,3 +86,39 @@ def test_many_configurations_at_once_equal_one_at_a_time(name: str) -> None:
             np.testing.assert_array_equal(got, np.array(want))
             if name != "baxter_hug_box":  # (its arms press on the box about q0: all in contact)
                 assert np.any(got < 0.0) and np.any(got >= 0.0)  # both verdicts occur
+
+
+@pytest.mark.parametrize("name", ["sphere_four_finger_palm", "sphere_four_finger_wrap"])
+def test_many_configurations_cull_link_pairs_by_their_bound(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``finger_clearances`` computes a link pair's distance only where its lower bound (midpoint
+    distance minus the half lengths) is below the minimum so far: curled fingers (joints 1.5 rad
+    about q0) bring some own pairs close, most stay far; the answers equal ``finger_clearance``
+    one configuration at a time, bit for bit, and both kinds of pair occur."""
+    scene = load_scene(ROOT / "examples" / f"{name}.json")
+    hand = HandKinematics.from_scene(scene)
+    model = CollisionModel.of(scene, hand)
+    pos = np.asarray(scene.object.pose.position, dtype=float)
+    rot = np.eye(3)
+    rng = np.random.default_rng(3)
+    rows = {"computed": 0, "all": 0}
+    orig = collision_mod.segment_segment_distances
+
+    def seg(*a: np.ndarray) -> np.ndarray:
+        rows["computed"] += len(a[0])
+        return orig(*a)
+
+    monkeypatch.setattr(collision_mod, "segment_segment_distances", seg)
+    for f in range(len(hand.fingers)):
+        sl = hand.finger_slice(f)
+        X = hand.q0[sl] + rng.normal(0.0, 1.5, (60, sl.stop - sl.start))
+        got = model.finger_clearances(f, hand.q0, X, pos, rot)
+        rows["all"] += 60 * len(model._finger_data(f).pairs)
+        mark = rows["computed"]  # the batch's rows (not the one-at-a-time calls below)
+        q = hand.q0.copy()
+        want = []
+        for x in X:
+            q[sl] = x
+            want.append(model.finger_clearance(f, q, pos, rot))
+        rows["computed"] = mark  # not the one-at-a-time calls
+        np.testing.assert_array_equal(got, np.array(want))
+    assert 0 < rows["computed"] < 0.5 * rows["all"]
