@@ -496,6 +496,61 @@ class CollisionModel:
         Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         od = _shape_segments_distance(self.scene.object.shape, (Af - pos) @ R, (Bf - pos) @ R, d, self.sample_step)
         od = od.reshape(N, n)
+        others = [k for k in range(len(self.hand.fingers))
+                  if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
+        segs = [(np.broadcast_to(sg[0], (N, *sg[0].shape)), np.broadcast_to(sg[1], (N, *sg[1].shape)))
+                for sg in (self._segments_cached(k, q) for k in others)]
+        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching)
+
+    def clearances_along(
+        self,
+        finger: int,
+        Q: Array,
+        positions: Array,
+        rotations: Array,
+        allowance: Array | None = None,
+        touching: Sequence[BodyRef] = (),
+    ) -> Array:
+        """:meth:`finger_clearance` of ``finger`` at the states of a path: the hand at ``Q[k]`` ``(N, M)``
+        and the object at ``positions[k]`` ``(N, d)``, ``rotations[k]`` ``(N, 3, 3)`` (every joint and
+        the object move, as along an object motion); returns ``(N,)``, equal to one state at a time
+        bit for bit (as :meth:`finger_clearances`, which keeps the other joints and the object still)."""
+        fd = self._finger_data(finger)
+        Q = np.asarray(Q, dtype=float)
+        N = Q.shape[0]
+        others = [k for k in range(len(self.hand.fingers))
+                  if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
+        if (fd.urdf or fd.coal_object or fd.rot_K is None or N == 0
+                or any(self._finger_data(k).rot_K is None or self._finger_data(k).urdf for k in others)):
+            return np.array([self.finger_clearance(finger, Q[k], positions[k], rotations[k], touching, allowance)
+                             for k in range(N)], dtype=float).reshape(N)
+        n = len(fd.refs)
+        d = self.scene.dim
+        A, B = self._segment_arrays_many(finger, Q[:, self.hand.finger_slice(finger)])  # (N, n, d) each
+        R = np.asarray(rotations, dtype=float)[:, :d, :d]  # (N, d, d)
+        pos = np.asarray(positions, dtype=float)[:, None, :d]  # (N, 1, d)
+        od = _shape_segments_distance(self.scene.object.shape, ((A - pos) @ R).reshape(N * n, d),
+                                      ((B - pos) @ R).reshape(N * n, d), d, self.sample_step).reshape(N, n)
+        segs = [self._segment_arrays_many(k, Q[:, self.hand.finger_slice(k)]) for k in others]
+        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching)
+
+    def _clearances_min(
+        self,
+        fd: _FingerData,
+        finger: int,
+        A: Array,
+        B: Array,
+        od: Array,
+        segs: list[tuple[Array, Array]],
+        allowance: Array | None,
+        touching: Sequence[BodyRef],
+    ) -> Array:
+        """The minimum of ``terms - allowance`` per state of :meth:`finger_clearances` and
+        :meth:`clearances_along`: the finger's link axes ``A``, ``B`` ``(N, n, d)``, their distances
+        ``od`` ``(N, n)`` to the object, the link axes ``(N, n_k, d)`` of each finger checked against
+        it; own and other pairs and fixed bodies culled by their lower bounds."""
+        N, n, d = A.shape
+        Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         if allowance is None:
             al = self._cache.get(("zeros", finger))
             if al is None:
@@ -513,13 +568,10 @@ class CollisionModel:
         best = obj.min(axis=1)  # (N,) the minimum so far, as in _capsule_clearance_min
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):  # own non-adjacent pairs, then the links of the fingers checked against this one
-            others = [k for k in range(len(self.hand.fingers))
-                      if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
             S0, S1 = A, B
-            if others:
-                segs = [self._segments_cached(k, q) for k in others]
-                S0 = np.concatenate([A, *(np.broadcast_to(sg[0], (N, *sg[0].shape)) for sg in segs)], axis=1)
-                S1 = np.concatenate([B, *(np.broadcast_to(sg[1], (N, *sg[1].shape)) for sg in segs)], axis=1)
+            if segs:
+                S0 = np.concatenate([A, *(sg[0] for sg in segs)], axis=1)
+                S1 = np.concatenate([B, *(sg[1] for sg in segs)], axis=1)
             p = len(i)
             # only the pairs whose lower bound is below the minimum so far (as _capsule_clearance_min):
             # two segments are at least |c_a - c_b| - (L_a + L_b) / 2 apart (midpoints c, rigid links
