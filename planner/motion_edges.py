@@ -165,9 +165,9 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[Successor]
         def validate(state: GraspState = state, new: GraspState = new, key: Any = key, straight: Any = straight,
                      keep: list[int] = keep, dset: tuple[int, ...] = dset, sset: tuple[int, ...] = sset,
                      comb: str = comb, ts: Any = ts, rates: Array = rates, grasp: Any = grasp, summ: Any = summ,
-                     effort: float = effort) -> tuple[float, Any] | None:
+                     effort: float = effort, bound: float = bound) -> tuple[float, Any] | None:
             return validate_motion(nodes, state, new, key, straight, keep, dset, sset, comb, ts, rates, grasp, summ,
-                                   effort)
+                                   effort, bound)
 
         out.append(Successor(key, bound, None, validate))
     return out
@@ -192,11 +192,11 @@ def _state_after(nodes: GraphNodes, state: GraspState, keep: list[int], sset: tu
 
 def validate_motion(nodes: GraphNodes, state: GraspState, new: GraspState, key: Any, straight: Any, keep: list[int],
                     dset: tuple[int, ...], sset: tuple[int, ...], comb: str, ts: Any, rates: Array, grasp: Any,
-                    summ: Any, effort: float) -> tuple[float, Transition] | None:
+                    summ: Any, effort: float, bound: float) -> tuple[float, Transition] | None:
     """The lazy check of an object-motion edge to ``new`` (node ``key``): OMPL's constrained planning
     of the path from ``state`` to the integration's end ``straight``
     (:func:`~planner.object_motion.plan_object_motion`) and the new grasp's stationary grasp (18);
-    ``(cost, transition)`` or None."""
+    ``(cost, transition)`` or None (``bound``: the edge's lower bound in the search)."""
     options, size = nodes.options, nodes.size
     with nodes.timings.measure("ompl"):
         om = plan_object_motion(nodes.model, state, straight, keep, list(dset), seed=options.seed,
@@ -204,17 +204,19 @@ def validate_motion(nodes: GraphNodes, state: GraspState, new: GraspState, key: 
     if om is None:
         nodes.reject("OMPL found no collision-free object motion on the contact manifold")
         return None
+    jl = float(np.sum(np.linalg.norm(np.diff(om.q_path, axis=0), axis=1)))
+    cost = jl + om.length / size + effort
     if not (np.array_equal(om.q_path[-1], straight.q_path[-1])
             and np.array_equal(om.displacement_path[-1], pose_displacement(state, straight.pose_path[-1]))):
-        # OMPL's path ends at the integration's end (within 1e-6); the state there, as it ends
+        # OMPL's path ends at the integration's end, the goal state it was given (its checks allow
+        # 1e-6): should it end elsewhere, the state there, in the same node and at no less than
+        # the bound the search holds for the edge, else the edge is refused
         new = _state_after(nodes, state, keep, sset, om.q_path[-1], om.displacement_path[-1], om.pose_path[-1])
-        if new.key() != key:
-            nodes.reject("OMPL's object motion ends in another node than its integration")
+        if new.key() != key or cost < bound:
+            nodes.reject("OMPL's object motion ends away from its integration's end")
             return None
     if nodes.held(new) is None or not nodes.arrives(new):
         return None
-    jl = float(np.sum(np.linalg.norm(np.diff(om.q_path, axis=0), axis=1)))
-    cost = jl + om.length / size + effort
     torques = {"direction": ts.direction.tolist(), "dq": ts.dq.tolist(), "phi": ts.phi,
                "vertices": None if ts.generators is None else int(ts.generators.vertices.shape[0]),
                "rays": None if ts.generators is None else int(ts.generators.all_directions().shape[0]),
