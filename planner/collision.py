@@ -165,9 +165,12 @@ def _shape_segments_distance(shape: object, A: Array, B: Array, dim: int, step: 
     if isinstance(shape, Disk | Sphere):
         ab = B - A
         L2 = np.einsum("ij,ij->i", ab, ab)
-        t = np.clip(-np.einsum("ij,ij->i", A, ab) / np.where(L2 > 0.0, L2, 1.0), 0.0, 1.0)
-        t = np.where(L2 > 0.0, t, 0.0)
-        return np.linalg.norm(A + t[:, None] * ab, axis=1) - shape.radius
+        pos = L2 > 0.0
+        # clip to [0, 1] and the norm along axis 1, as np.clip and np.linalg.norm compute them
+        t = np.minimum(np.maximum(-np.einsum("ij,ij->i", A, ab) / np.where(pos, L2, 1.0), 0.0), 1.0)
+        t = np.where(pos, t, 0.0)
+        v = A + t[:, None] * ab
+        return np.sqrt((v * v).sum(axis=1)) - shape.radius
     if isinstance(shape, Segment):
         p0, p1 = (np.broadcast_to(np.asarray(p, float)[:dim], A.shape) for p in shape.points)
         return segment_segment_distances(A, B, p0, p1)
@@ -638,9 +641,8 @@ class CollisionModel:
                                                  np.array([k2 for _, k2 in fd.rot_K]))
         S, C = np.sin(X[:, :n]), 1.0 - np.cos(X[:, :n])  # (N, n)
         Rot = _EYE3 + S[:, :, None, None] * K[0] + C[:, :, None, None] * K[1]  # (N, n, 3, 3) joint rotations
-        R = np.broadcast_to(chain.base_R, (N, 3, 3))
-        p = np.broadcast_to(chain.base_p, (N, 3))
-        p = p + R @ chain.origins[0]
+        R = chain.base_R  # (3, 3), then (N, 3, 3) once the first joint turns
+        p = chain.base_p + R @ chain.origins[0]  # (3,), then (N, 3)
         for k in range(n):
             R = R @ Rot[:, k]
             end = chain.origins[k + 1] if k + 1 < n else chain.tip
