@@ -523,8 +523,7 @@ class CollisionModel:
         N = Q.shape[0]
         others = [k for k in range(len(self.hand.fingers))
                   if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
-        if (fd.urdf or fd.coal_object or fd.rot_K is None or N == 0
-                or any(self._finger_data(k).rot_K is None or self._finger_data(k).urdf for k in others)):
+        if N == 0 or not self.batched(finger):
             return np.array([self.finger_clearance(finger, Q[k], positions[k], rotations[k], touching, allowance)
                              for k in range(N)], dtype=float).reshape(N)
         n = len(fd.refs)
@@ -536,6 +535,17 @@ class CollisionModel:
                                       ((B - pos) @ R).reshape(N * n, d), d, self.sample_step).reshape(N, n)
         segs = [self._segment_arrays_many(k, Q[:, self.hand.finger_slice(k)]) for k in others]
         return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching)
+
+    def batched(self, finger: int) -> bool:
+        """Whether :meth:`clearances_along` evaluates ``finger``'s states in one pass (a capsule
+        serial chain checked against capsule serial chains and a shape with a signed distance);
+        else it goes one state at a time."""
+        fd = self._finger_data(finger)
+        if fd.urdf or fd.coal_object or fd.rot_K is None:
+            return False
+        return not any(self._finger_data(k).rot_K is None or self._finger_data(k).urdf
+                       for k in range(len(self.hand.fingers))
+                       if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs)
 
     def _clearances_min(
         self,
