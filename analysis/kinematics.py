@@ -19,8 +19,10 @@ import numpy as np
 from analysis._types import Array
 from analysis.exceptions import SceneError
 from analysis.pose import Pose
-from analysis.rotations import axis_angle_matrix
+from analysis.rotations import skew
 from analysis.scene import Finger2D, Finger3D, FingerURDF, Scene
+
+_EYE3 = np.eye(3)
 
 
 class FingerModel(Protocol):
@@ -80,6 +82,9 @@ class SerialChain:
         self.radii = np.asarray(radii, dtype=float)
         self.q0 = np.asarray(q0, dtype=float)
         self.n_joints = len(self.q0)
+        # Rodrigues' formula per joint (analysis.rotations.axis_angle_matrix), its constant parts
+        self._K = [skew(a) for a in self.axes]  # (3, 3) each
+        self._KK = [K @ K for K in self._K]
 
     def body_names(self) -> list[str]:
         return [f"{self.name}/{k}" for k in range(self.n_joints)]
@@ -101,24 +106,40 @@ class SerialChain:
         Rs, ps = [], []
         for j in range(self.n_joints):
             p = p + R @ self.origins[j]
-            R = R @ axis_angle_matrix(self.axes[j], float(q[j]))
+            # axis_angle_matrix(axes[j], q_j), its skew matrices computed once
+            a = float(q[j])
+            R = R @ (_EYE3 + np.sin(a) * self._K[j] + (1.0 - np.cos(a)) * self._KK[j])
             R.setflags(write=False)
             p.setflags(write=False)
             Rs.append(R)
             ps.append(p)
         self.__dict__["_frames_last"] = (key, (Rs, ps))
+        self.__dict__.pop("_axes_last", None)
         return Rs, ps
+
+    def _world_axes(self, q: Array) -> tuple[Array, Array]:
+        """The joint axes ``(n, 3)`` and origins ``(n, 3)`` in the world at ``q`` (remembered with
+        :meth:`frames`)."""
+        Rs, ps = self.frames(q)
+        got = self.__dict__.get("_axes_last")
+        if got is None:
+            got = (np.array([Rs[j] @ self.axes[j] for j in range(self.n_joints)]).reshape(-1, 3), np.array(ps))
+            self.__dict__["_axes_last"] = got
+        return got
 
     def body_pose(self, k: int, q: Array) -> tuple[Array, Array]:
         Rs, ps = self.frames(q)
         return Rs[k], ps[k]
 
     def point_jacobian(self, k: int, x: Array, q: Array) -> Array:
-        Rs, ps = self.frames(q)
-        J = np.zeros((3, self.n_joints))  # (3, n)
-        for j in range(k + 1):
-            a = Rs[j] @ self.axes[j]
-            J[:, j] = np.cross(a, x - ps[j])
+        A, P = self._world_axes(q)  # (n, 3) each
+        m = k + 1
+        A = A[:m]
+        r = np.asarray(x, dtype=float) - P[:m]  # (k + 1, 3)
+        J = np.zeros((3, self.n_joints))  # (3, n): column j = a_j x (x - p_j), as np.cross computes it
+        J[0, :m] = A[:, 1] * r[:, 2] - A[:, 2] * r[:, 1]
+        J[1, :m] = A[:, 2] * r[:, 0] - A[:, 0] * r[:, 2]
+        J[2, :m] = A[:, 0] * r[:, 1] - A[:, 1] * r[:, 0]
         return J
 
     def body_segment(self, k: int, q: Array) -> tuple[Array, Array]:

@@ -197,10 +197,12 @@ def with_detected_contacts(data: dict[str, Any], *, tolerance: float = DEFAULT_T
     return {**data, "contacts": [c.to_json() for c in detection.contacts]}, detection
 
 
-def scene_from_dict(data: Any) -> Scene:
+def scene_from_dict(data: Any, geometry: bool = True) -> Scene:
     """Validate a parsed scene (the model, then :func:`check_geometry`); raise
     :class:`SceneError` naming the first bad field. Contacts omitted, ``[]`` or ``"auto"`` are
-    found from the geometry first (:func:`with_detected_contacts`, default tolerance and ``mu``)."""
+    found from the geometry first (:func:`with_detected_contacts`, default tolerance and ``mu``).
+    ``geometry = False`` validates the model only: for a caller that knows the contacts' geometry
+    holds (the planner's grasp states whose contacts were all checked in the same place)."""
     if isinstance(data, Scene):
         return data  # pydantic does not validate a model instance again; neither does this
     if wants_detection(data):
@@ -209,7 +211,8 @@ def scene_from_dict(data: Any) -> Scene:
         scene = Scene.model_validate(data)
     except ValidationError as e:
         raise _first_error(_as_errors(e)) from None
-    check_geometry(scene)
+    if geometry:
+        check_geometry(scene)
     return scene
 
 

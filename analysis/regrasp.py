@@ -65,7 +65,10 @@ def regrasp_cone(
     rays = (g.rays @ Lqr.T).reshape(-1, M)
     lines = (g.lines @ Lqr.T).reshape(-1, M)
     dirs = np.vstack([rays, lines, -lines]).reshape(-1, M)
-    feasible = np.array([_equilibrium_with_sliding(system, sel, st, fs, dq) for dq in dirs], dtype=bool)
+    if sel.s_index or not len(dirs):
+        feasible = np.array([_equilibrium_with_sliding(system, sel, st, fs, dq) for dq in dirs], dtype=bool)
+    else:  # no S-point: the equilibrium does not depend on dq (the stationary grasp, 18), one LP for all
+        feasible = np.full(len(dirs), _equilibrium_with_sliding(system, sel, st, fs, dirs[0]), dtype=bool)
     return RegraspCone(J_d, Lqr, rays, lines, feasible, exact=not sel.s_index)
 
 

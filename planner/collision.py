@@ -165,9 +165,12 @@ def _shape_segments_distance(shape: object, A: Array, B: Array, dim: int, step: 
     if isinstance(shape, Disk | Sphere):
         ab = B - A
         L2 = np.einsum("ij,ij->i", ab, ab)
-        t = np.clip(-np.einsum("ij,ij->i", A, ab) / np.where(L2 > 0.0, L2, 1.0), 0.0, 1.0)
-        t = np.where(L2 > 0.0, t, 0.0)
-        return np.linalg.norm(A + t[:, None] * ab, axis=1) - shape.radius
+        pos = L2 > 0.0
+        # clip to [0, 1] and the norm along axis 1, as np.clip and np.linalg.norm compute them
+        t = np.minimum(np.maximum(-np.einsum("ij,ij->i", A, ab) / np.where(pos, L2, 1.0), 0.0), 1.0)
+        t = np.where(pos, t, 0.0)
+        v = A + t[:, None] * ab
+        return np.sqrt((v * v).sum(axis=1)) - shape.radius
     if isinstance(shape, Segment):
         p0, p1 = (np.broadcast_to(np.asarray(p, float)[:dim], A.shape) for p in shape.points)
         return segment_segment_distances(A, B, p0, p1)
@@ -269,6 +272,7 @@ def _trimmed_at_base(A: Array, B: Array, base: Array, r_infl: Array) -> tuple[Ar
     A2 = np.where(at_base[:, None], A + D * (trim / np.where(L > 0, L, 1.0))[:, None], A)
     return A2, skip
 
+
 @dataclass(frozen=True)
 class _FingerData:
     """Static data of one finger for the vectorised clearance."""
@@ -281,6 +285,8 @@ class _FingerData:
     base: Array  # (dim,) base joint position
     pairs: Array  # (p, 2) own non-adjacent link pairs, then (own link, link of another checked finger)
     pair_radii: Array  # (p,) sum of the capsule radii of each pair
+    #: (p,) half the sum of the link lengths of each pair, less 1e-9 of each (at q0; links are rigid)
+    pair_half: Array
     rot_K: list[tuple[Array, Array]] | None  # serial chains: (K, K @ K) of every joint axis
     urdf: bool  # the links are URDF collision shapes (coal), radius 0
     coal_object: bool  # the object distances through coal (URDF links, or a mesh object)
@@ -493,6 +499,71 @@ class CollisionModel:
         Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         od = _shape_segments_distance(self.scene.object.shape, (Af - pos) @ R, (Bf - pos) @ R, d, self.sample_step)
         od = od.reshape(N, n)
+        others = [k for k in range(len(self.hand.fingers))
+                  if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
+        segs = [(np.broadcast_to(sg[0], (N, *sg[0].shape)), np.broadcast_to(sg[1], (N, *sg[1].shape)))
+                for sg in (self._segments_cached(k, q) for k in others)]
+        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching)
+
+    def clearances_along(
+        self,
+        finger: int,
+        Q: Array,
+        positions: Array,
+        rotations: Array,
+        allowance: Array | None = None,
+        touching: Sequence[BodyRef] = (),
+    ) -> Array:
+        """:meth:`finger_clearance` of ``finger`` at the states of a path: the hand at ``Q[k]`` ``(N, M)``
+        and the object at ``positions[k]`` ``(N, d)``, ``rotations[k]`` ``(N, 3, 3)`` (every joint and
+        the object move, as along an object motion); returns ``(N,)``, equal to one state at a time
+        bit for bit (as :meth:`finger_clearances`, which keeps the other joints and the object still)."""
+        fd = self._finger_data(finger)
+        Q = np.asarray(Q, dtype=float)
+        N = Q.shape[0]
+        others = [k for k in range(len(self.hand.fingers))
+                  if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
+        if N == 0 or not self.batched(finger):
+            return np.array([self.finger_clearance(finger, Q[k], positions[k], rotations[k], touching, allowance)
+                             for k in range(N)], dtype=float).reshape(N)
+        n = len(fd.refs)
+        d = self.scene.dim
+        A, B = self._segment_arrays_many(finger, Q[:, self.hand.finger_slice(finger)])  # (N, n, d) each
+        R = np.asarray(rotations, dtype=float)[:, :d, :d]  # (N, d, d)
+        pos = np.asarray(positions, dtype=float)[:, None, :d]  # (N, 1, d)
+        od = _shape_segments_distance(self.scene.object.shape, ((A - pos) @ R).reshape(N * n, d),
+                                      ((B - pos) @ R).reshape(N * n, d), d, self.sample_step).reshape(N, n)
+        segs = [self._segment_arrays_many(k, Q[:, self.hand.finger_slice(k)]) for k in others]
+        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching)
+
+    def batched(self, finger: int) -> bool:
+        """Whether :meth:`clearances_along` evaluates ``finger``'s states in one pass (a capsule
+        serial chain checked against capsule serial chains and a shape with a signed distance);
+        else it goes one state at a time."""
+        fd = self._finger_data(finger)
+        if fd.urdf or fd.coal_object or fd.rot_K is None:
+            return False
+        return not any(self._finger_data(k).rot_K is None or self._finger_data(k).urdf
+                       for k in range(len(self.hand.fingers))
+                       if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs)
+
+    def _clearances_min(
+        self,
+        fd: _FingerData,
+        finger: int,
+        A: Array,
+        B: Array,
+        od: Array,
+        segs: list[tuple[Array, Array]],
+        allowance: Array | None,
+        touching: Sequence[BodyRef],
+    ) -> Array:
+        """The minimum of ``terms - allowance`` per state of :meth:`finger_clearances` and
+        :meth:`clearances_along`: the finger's link axes ``A``, ``B`` ``(N, n, d)``, their distances
+        ``od`` ``(N, n)`` to the object, the link axes ``(N, n_k, d)`` of each finger checked against
+        it; own and other pairs and fixed bodies culled by their lower bounds."""
+        N, n, d = A.shape
+        Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         if allowance is None:
             al = self._cache.get(("zeros", finger))
             if al is None:
@@ -510,24 +581,30 @@ class CollisionModel:
         best = obj.min(axis=1)  # (N,) the minimum so far, as in _capsule_clearance_min
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):  # own non-adjacent pairs, then the links of the fingers checked against this one
-            others = [k for k in range(len(self.hand.fingers))
-                      if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
             S0, S1 = A, B
-            if others:
-                segs = [self._segments_cached(k, q) for k in others]
-                S0 = np.concatenate([A, *(np.broadcast_to(sg[0], (N, *sg[0].shape)) for sg in segs)], axis=1)
-                S1 = np.concatenate([B, *(np.broadcast_to(sg[1], (N, *sg[1].shape)) for sg in segs)], axis=1)
+            if segs:
+                S0 = np.concatenate([A, *(sg[0] for sg in segs)], axis=1)
+                S1 = np.concatenate([B, *(sg[1] for sg in segs)], axis=1)
             p = len(i)
-            pd = segment_segment_distances(S0[:, i].reshape(N * p, d), S1[:, i].reshape(N * p, d),
-                                           S0[:, j].reshape(N * p, d), S1[:, j].reshape(N * p, d))
-            best = np.minimum(best, (pd.reshape(N, p) - fd.pair_radii - al[2 * n:]).min(axis=1))
+            # only the pairs whose lower bound is below the minimum so far (as _capsule_clearance_min):
+            # two segments are at least |c_a - c_b| - (L_a + L_b) / 2 apart (midpoints c, rigid links
+            # of lengths L); the others cannot hold the minimum
+            Mid = 0.5 * (S0 + S1)  # (N, n_s, d)
+            gap = Mid[:, i] - Mid[:, j]  # (N, p, d)
+            bound = np.sqrt((gap * gap).sum(axis=2)) - fd.pair_half - fd.pair_radii - al[2 * n:]  # (N, p)
+            need = (bound - 1e-9 < best[:, None]).reshape(N * p)
+            if need.any():
+                pd = np.full(N * p, np.inf)
+                pd[need] = segment_segment_distances(S0[:, i].reshape(N * p, d)[need], S1[:, i].reshape(N * p, d)[need],
+                                                     S0[:, j].reshape(N * p, d)[need], S1[:, j].reshape(N * p, d)[need])
+                best = np.minimum(best, (pd.reshape(N, p) - fd.pair_radii - al[2 * n:]).min(axis=1))
         if fd.any_fixed:  # the fixed bodies, only for the links whose lower bound is below `best`
             tiles = self._cache.get(("tiles", finger, N))
             if tiles is None:
                 tiles = self._cache[("tiles", finger, N)] = (np.tile(fd.r_infl, N), np.tile(fd.fixed_checked, N))
             r_all, fixed_checked = tiles  # (N n,) each
             A2, skip = _trimmed_at_base(Af, Bf, fd.base, r_all)
-            al_f = np.tile(al[n:2 * n], N)
+            al_f = al[n:2 * n]  # (n,), per link
             checked = fixed_checked & ~skip
             E = Bf - A2
             half = 0.5 * np.sqrt((E * E).sum(axis=1))
@@ -538,7 +615,7 @@ class CollisionModel:
                 lb = shape_signed_distances(bodies[0].shape, C, d) - half
                 for fb in bodies[1:]:
                     lb = np.minimum(lb, shape_signed_distances(fb.shape, C, d) - half)
-                need = checked & (lb - r_all - al_f - 1e-9 < np.repeat(best, n))
+                need = checked & ((lb.reshape(N, n) - fd.r_infl - al_f - 1e-9) < best[:, None]).reshape(N * n)
             if need.any():
                 # sampled as the whole block would be: the sample count from the longest link
                 length = float(2.0 * half.max())
@@ -547,7 +624,7 @@ class CollisionModel:
                     dist = np.minimum(dist, _shape_segments_distance(fb.shape, A2[need], Bf[need], d, self.sample_step,
                                                                      length))
                 fixed = np.full(N * n, np.inf)
-                fixed[need] = dist - r_all[need] - al_f[need]
+                fixed[need] = dist - r_all[need] - al_f[np.flatnonzero(need) % n]
                 best = np.minimum(best, fixed.reshape(N, n).min(axis=1))
         return np.asarray(best)
 
@@ -574,13 +651,14 @@ class CollisionModel:
                                                  np.array([k2 for _, k2 in fd.rot_K]))
         S, C = np.sin(X[:, :n]), 1.0 - np.cos(X[:, :n])  # (N, n)
         Rot = _EYE3 + S[:, :, None, None] * K[0] + C[:, :, None, None] * K[1]  # (N, n, 3, 3) joint rotations
-        R = np.broadcast_to(chain.base_R, (N, 3, 3))
-        p = np.broadcast_to(chain.base_p, (N, 3))
+        R = chain.base_R  # (3, 3), then (N, 3, 3) once the first joint turns
+        p = chain.base_p + R @ chain.origins[0]  # (3,), then (N, 3)
         for k in range(n):
-            p = p + R @ chain.origins[k]
             R = R @ Rot[:, k]
             end = chain.origins[k + 1] if k + 1 < n else chain.tip
-            A[:, k], B[:, k] = p, p + R @ end
+            A[:, k] = p
+            p = p + R @ end  # the end of link k is the origin of joint k + 1
+            B[:, k] = p
         return A[:, :, :d], B[:, :, :d]
 
     def _capsule_clearance_min(
@@ -748,6 +826,10 @@ class CollisionModel:
                     radii.append(np.array([self.radius(r) for r in self.links(j)]))
                     stacked_refs += self.links(j)
             stacked = np.concatenate(radii)
+            lengths = np.concatenate([[float(np.linalg.norm(np.subtract(*self.hand.body_segment(r, self.hand.q0))))
+                                       for r in self.links(k)] for k in [finger, *[
+                                           j for j in range(len(self.hand.fingers))
+                                           if j != finger and (min(j, finger), max(j, finger)) in self.finger_pairs]]])
             pairs = [(i, j) for i in range(n) for j in range(i + 2, n)]
             pairs += [(i, j) for i in range(n) for j in range(n, len(stacked))]
             pa = np.array(pairs, dtype=int).reshape(-1, 2)
@@ -764,6 +846,7 @@ class CollisionModel:
                 np.asarray(chain.body_pose(0, self.hand.q0[sl])[1][: self.scene.dim], dtype=float),
                 pa,
                 stacked[pa[:, 0]] + stacked[pa[:, 1]],
+                0.5 * (lengths[pa[:, 0]] + lengths[pa[:, 1]]) * (1.0 - 1e-9) if len(pa) else np.zeros(0),
                 rot_K,
                 self.is_urdf(finger),
                 self.is_urdf(finger) or isinstance(self.scene.object.shape, Mesh),

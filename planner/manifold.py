@@ -28,6 +28,7 @@ from analysis.scene import Box, Disk, Polygon, Scene, Sphere
 from planner.state import GraspState
 
 _EYE3 = np.eye(3)
+_EYE2 = np.eye(2)
 
 
 def _left_jacobian_so3(w: Array) -> Array:
@@ -327,25 +328,49 @@ class ContactManifold:
             out[2 * k: 2 * k + 2] = self._roll_at(k, a[:2], b[:2], c, float(s[2]))
         return out
 
+    def _roll_grad(self, k: int, a: Array, b: Array, c: Array) -> Array:
+        """``(2, 7)``: the derivatives of :meth:`_roll_at` (gap, rolling row) in the axis ends ``a``,
+        ``b``, the centre ``c`` (``(2,)`` each) and the turn ``theta``. With ``e = b - a``,
+        ``w = c - a``, the foot parameter ``t = w.e / |e|^2`` (held at 0 or 1 beyond the ends, where
+        ``dt = 0``) and ``v = w - t e``: ``d|v| = u.dv``, the angle of ``v`` (of ``u``, of ``gamma``)
+        changes by ``v_perp.dv / |v|^2`` and that of ``e`` (of the side's normal) by
+        ``e_perp.de / |e|^2``, ``psi`` by their difference, ``sigma = -side t |e| + rho psi``."""
+        _, ref, side, _, _ = self.rolls[k]
+        e = b - a  # (2,)
+        w = c - a  # (2,)
+        L2 = float(e @ e)
+        L = float(np.sqrt(L2))
+        t_raw = float(w @ e) / L2
+        t = min(max(t_raw, 0.0), 1.0)
+        v = w - t * e  # (2,) from the foot on the axis to the centre
+        dist2 = float(v @ v)
+        De = np.zeros((2, 7))  # d e / d z, z = (a, b, c, theta)
+        De[:, 0:2] = -_EYE2
+        De[:, 2:4] = _EYE2
+        Dw = np.zeros((2, 7))  # d w / d z
+        Dw[:, 0:2] = -_EYE2
+        Dw[:, 4:6] = _EYE2
+        dt = (e @ Dw + w @ De - 2.0 * t * (e @ De)) / L2 if 0.0 < t_raw < 1.0 else np.zeros(7)  # (7,)
+        Dv = Dw - t * De - np.outer(e, dt)  # (2, 7)
+        d_dist = (v @ Dv) / np.sqrt(dist2)  # (7,)
+        d_angle_v = np.array([-v[1], v[0]]) @ Dv / dist2  # (7,) the angle of v: of u and of gamma
+        d_angle_e = np.array([-e[1], e[0]]) @ De / L2  # (7,) the angle of e: of the side's normal
+        d_sigma = -side * (L * dt + t * (e @ De) / L) + self.hand.body_radius(ref) * (d_angle_v - d_angle_e)
+        d_roll = d_sigma + self.radius * d_angle_v
+        d_roll[6] -= self.radius  # beta = gamma - theta
+        return np.vstack([d_dist, d_roll])
+
     def _rolling_jacobian(self, x: Array) -> Array:
-        """``(2 n_roll, M + D)`` of :meth:`_rolling_rows`: central differences (h = 1e-7: errors
-        ~1e-8 on smooth pieces) in the axis ends ``a``, ``b``, the centre ``c`` and the turn, times
-        their Jacobians (``a``, ``b`` points of the link, eq. 1; ``c = p_0 + s_xy``, the turn ``s_theta``)."""
-        h = 1e-7
+        """``(2 n_roll, M + D)`` of :meth:`_rolling_rows`: the derivatives in the axis ends ``a``,
+        ``b``, the centre ``c`` and the turn (:meth:`_roll_grad`), times their Jacobians (``a``, ``b``
+        points of the link, eq. 1; ``c = p_0 + s_xy``, the turn ``s_theta``)."""
         q, s = x[: self.M], x[self.M:]
         c = self.pose(s).position
-        th = float(s[2])
         J = np.zeros((2 * len(self.rolls), self.M + self.D))
         for k, roll in enumerate(self.rolls):
             ref = roll[1]
             a3, b3 = self.hand.body_segment(ref, q)
-            a, b = a3[:2], b3[:2]
-            z = np.concatenate([a, b, c, [th]])  # (7,)
-
-            def f(v: Array) -> Array:
-                return np.array(self._roll_at(k, v[0:2], v[2:4], v[4:6], float(v[6])))  # noqa: B023
-
-            dz = np.column_stack([(f(z + h * e) - f(z - h * e)) / (2 * h) for e in np.eye(7)])  # (2, 7)
+            dz = self._roll_grad(k, a3[:2], b3[:2], c)  # (2, 7)
             Ja = self.hand.point_jacobian(ref, a3, q)[:2]  # (2, M)
             Jb = self.hand.point_jacobian(ref, b3, q)[:2]  # (2, M)
             rows = slice(2 * k, 2 * k + 2)

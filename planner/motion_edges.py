@@ -31,16 +31,16 @@ from analysis.pose import Pose
 from analysis.scene import Box, Polygon
 from analysis.torques import torque_set
 from planner.goals import pose_goal_remaining
-from planner.manifold import ContactManifold
+from planner.manifold import ContactManifold, pose_displacement
 from planner.nodes import GraphNodes
 from planner.object_motion import (
-    ConstrainedObjectMotion,
     corner_normal,
     integrate_object_motion,
     keep_contacts,
     plan_object_motion,
     rolled_contacts,
 )
+from planner.search import Successor
 from planner.state import GraspContact, GraspState
 from planner.transition import ObjectMotionFigures, Transition
 
@@ -49,8 +49,15 @@ from planner.transition import ObjectMotionFigures, Transition
 UNSUPPORTED = "not supported: "
 
 
-def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Transition, GraspState]]:
-    """Eq. (30)-(32): move the object along a DAFC direction; the D-contacts separate."""
+def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[Successor]:
+    """Eq. (30)-(32): move the object along a DAFC direction; the D-contacts separate.
+
+    Lazy edges, as the contact edges: the analysis (the combination, the direction, the torque set
+    T) and the integration of the motion (its end: the next state and the node) are done here;
+    the bound is the straight joint distance plus the straight object distance (over the object
+    size) to that end, plus the effort term; OMPL's constrained planning of the path between the
+    two ends, and the new grasp's stationary grasp (18), only when the search needs the edge
+    (:func:`validate_motion`)."""
     hand, goal, options, size = nodes.hand, nodes.goal, nodes.options, nodes.size
     out = []
     sa = nodes.analysis(state)
@@ -141,33 +148,86 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Tran
         if straight is None:
             nodes.reject("object motion leaves the contact manifold or its end collides")
             continue
-        with nodes.timings.measure("ompl"):
-            om = plan_object_motion(nodes.model, state, straight, keep, list(dset), seed=options.seed,
-                                    time_limit=options.ompl_time, sliding=sset, checks=options.ompl_checks)
-        if om is None:
-            nodes.reject("OMPL found no collision-free object motion on the contact manifold")
+        # the end of the motion is the integration's (OMPL plans between the two ends): the state
+        # there, its node and the lower bound of the edge's cost are known before OMPL plans it
+        q1 = straight.q_path[-1]  # (M,)
+        s1 = pose_displacement(state, straight.pose_path[-1])  # (D,)
+        new = _state_after(nodes, state, keep, sset, q1, s1, state.pose.displaced(s1).vector())
+        if not nodes.arrives(new):
             continue
-        # sliding contacts where they slid, rolling ones (a disk on a link's side) where they rolled
-        slid = _slid_contacts(nodes, state, sset, om)
-        end = state.with_contacts(rolled_contacts(nodes.hand, nodes.scene, state, keep, om.q_path[-1],
-                                                  om.displacement_path[-1], slid), om.q_path[-1])
-        final = end.with_pose(Pose.from_vector(om.pose_path[-1], state.dim))
-        new = _turned_normals(nodes, keep_contacts(final, sorted(keep + list(sset)), om.q_path[-1]))
-        if nodes.held(new) is None:
-            continue
-        jl = float(np.sum(np.linalg.norm(np.diff(om.q_path, axis=0), axis=1)))
-        cost = jl + om.length / size + options.effort_weight * float(np.linalg.norm(ts.tau))
-        torques = {"direction": ts.direction.tolist(), "dq": ts.dq.tolist(), "phi": ts.phi,
-                   "vertices": None if ts.generators is None else int(ts.generators.vertices.shape[0]),
-                   "rays": None if ts.generators is None else int(ts.generators.all_directions().shape[0]),
-                   "dim_force_polyhedron": ts.dim_P, "work": ts.work, "nlp_status": ts.nlp_status}
-        figures = ObjectMotionFigures(
-            summ.dim_dafc, summ.a_bar, tuple(rates.tolist()), tuple(om.separations.tolist()), tuple(sset),
-            om.length, om.max_residual, om.planner_states, om.states_checked, om.max_joint_step, om.ompl_seconds)
-        t = Transition("object_motion", comb, state.bodies(), new.bodies(), om.q_path, om.pose_path, grasp.tau,
-                       ts.tau, torques, figures, cost)
-        out.append((t, new))
+        effort = options.effort_weight * float(np.linalg.norm(ts.tau))
+        # the joint path and the object path each at least as long as the straight line between their ends
+        bound = (float(np.linalg.norm(q1 - state.q))
+                 + float(np.linalg.norm(state.pose.displaced(s1).vector() - state.pose_vector())) / size)
+        bound = max(bound * (1.0 - BOUND_SLACK) + effort, 1e-9)
+        key = nodes.add(new, validated=False)
+
+        def validate(state: GraspState = state, new: GraspState = new, key: Any = key, straight: Any = straight,
+                     keep: list[int] = keep, dset: tuple[int, ...] = dset, sset: tuple[int, ...] = sset,
+                     comb: str = comb, ts: Any = ts, rates: Array = rates, grasp: Any = grasp, summ: Any = summ,
+                     effort: float = effort, bound: float = bound) -> tuple[float, Any] | None:
+            return validate_motion(nodes, state, new, key, straight, keep, dset, sset, comb, ts, rates, grasp, summ,
+                                   effort, bound)
+
+        out.append(Successor(key, bound, None, validate))
     return out
+
+
+#: relative slack of the lower bound of an object-motion edge (the path lengths are sums of
+#: segment lengths, each at least the straight distance between its ends, up to round-off)
+BOUND_SLACK = 1e-9
+
+
+def _state_after(nodes: GraphNodes, state: GraspState, keep: list[int], sset: tuple[int, ...], q1: Array, s1: Array,
+                 pose1: Array) -> GraspState:
+    """The state at the end of an object motion from ``state``: the hand at ``q1`` ``(M,)``, the
+    object at the displacement ``s1`` ``(D,)`` (pose vector ``pose1``), the contacts ``keep`` and
+    ``sset``: sliding contacts where they slid, rolling ones (a disk on a link's side) where they
+    rolled, the normals of contacts on the object's vertices and edges turned."""
+    slid = _slid_contacts(nodes, state, sset, q1, s1)
+    end = state.with_contacts(rolled_contacts(nodes.hand, nodes.scene, state, keep, q1, s1, slid), q1)
+    final = end.with_pose(Pose.from_vector(pose1, state.dim))
+    return _turned_normals(nodes, keep_contacts(final, sorted(keep + list(sset)), q1))
+
+
+def validate_motion(nodes: GraphNodes, state: GraspState, new: GraspState, key: Any, straight: Any, keep: list[int],
+                    dset: tuple[int, ...], sset: tuple[int, ...], comb: str, ts: Any, rates: Array, grasp: Any,
+                    summ: Any, effort: float, bound: float) -> tuple[float, Transition] | None:
+    """The lazy check of an object-motion edge to ``new`` (node ``key``): OMPL's constrained planning
+    of the path from ``state`` to the integration's end ``straight``
+    (:func:`~planner.object_motion.plan_object_motion`) and the new grasp's stationary grasp (18);
+    ``(cost, transition)`` or None (``bound``: the edge's lower bound in the search)."""
+    options, size = nodes.options, nodes.size
+    with nodes.timings.measure("ompl"):
+        om = plan_object_motion(nodes.model, state, straight, keep, list(dset), seed=options.seed,
+                                time_limit=options.ompl_time, sliding=sset, checks=options.ompl_checks)
+    if om is None:
+        nodes.reject("OMPL found no collision-free object motion on the contact manifold")
+        return None
+    jl = float(np.sum(np.linalg.norm(np.diff(om.q_path, axis=0), axis=1)))
+    cost = jl + om.length / size + effort
+    if not (np.array_equal(om.q_path[-1], straight.q_path[-1])
+            and np.array_equal(om.displacement_path[-1], pose_displacement(state, straight.pose_path[-1]))):
+        # OMPL's path ends at the integration's end, the goal state it was given (its checks allow
+        # 1e-6): should it end elsewhere, the state there, in the same node and at no less than
+        # the bound the search holds for the edge, else the edge is refused
+        new = _state_after(nodes, state, keep, sset, om.q_path[-1], om.displacement_path[-1], om.pose_path[-1])
+        if new.key() != key or cost < bound:
+            nodes.reject("OMPL's object motion ends away from its integration's end")
+            return None
+    if nodes.held(new) is None or not nodes.arrives(new):
+        return None
+    torques = {"direction": ts.direction.tolist(), "dq": ts.dq.tolist(), "phi": ts.phi,
+               "vertices": None if ts.generators is None else int(ts.generators.vertices.shape[0]),
+               "rays": None if ts.generators is None else int(ts.generators.all_directions().shape[0]),
+               "dim_force_polyhedron": ts.dim_P, "work": ts.work, "nlp_status": ts.nlp_status}
+    figures = ObjectMotionFigures(
+        summ.dim_dafc, summ.a_bar, tuple(rates.tolist()), tuple(om.separations.tolist()), tuple(sset),
+        om.length, om.max_residual, om.planner_states, om.states_checked, om.max_joint_step, om.ompl_seconds)
+    t = Transition("object_motion", comb, state.bodies(), new.bodies(), om.q_path, om.pose_path, grasp.tau,
+                   ts.tau, torques, figures, cost)
+    nodes.add(new)  # reached by a checked edge: validated
+    return cost, t
 
 
 #: relative sizes of the nudges of a direction whose torque set the vertex enumeration (cdd, in
@@ -247,20 +307,21 @@ def _link_slide_sets(nodes: GraphNodes, state: GraspState) -> list[tuple[int, ..
     return [sset]
 
 
-def _slid_contacts(nodes: GraphNodes, state: GraspState, sset: tuple[int, ...],
-                   om: ConstrainedObjectMotion) -> tuple[GraspContact, ...]:
-    """The contacts after an object motion: sliding ones (``sset``) where their bodies touch the
-    object at the end (new points on the body and the object), the others unchanged."""
+def _slid_contacts(nodes: GraphNodes, state: GraspState, sset: tuple[int, ...], q: Array,
+                   s: Array) -> tuple[GraspContact, ...]:
+    """The contacts after an object motion that ends with the hand at ``q`` ``(M,)`` and the object
+    at the displacement ``s`` ``(D,)``: sliding ones (``sset``) where their bodies touch the object
+    at the end (new points on the body and the object), the others unchanged."""
     if not sset:
         return state.contacts
     man = ContactManifold(nodes.hand, state, [], sset, nodes.scene)
-    x = np.concatenate([om.q_path[-1], om.displacement_path[-1]])
+    x = np.concatenate([q, s])
     out = list(state.contacts)
     for k, i in enumerate(sset):
         y, p_obj, n_obj = man.sliding_contact(k, x)
         ref = man.sliding[k]
         c = state.contacts[i]
-        out[i] = GraspContact(c.body, nodes.hand.to_local(ref, y, om.q_path[-1]), p_obj, n_obj, c.mu, c.origin)
+        out[i] = GraspContact(c.body, nodes.hand.to_local(ref, y, q), p_obj, n_obj, c.mu, c.origin)
     return tuple(out)
 
 

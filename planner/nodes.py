@@ -79,19 +79,21 @@ class GraphNodes:
         self.reject("the same grasp is already reached with another hand configuration")
         return False
 
-    def analysis(self, state: GraspState) -> StateAnalysis:
-        """The (cached) closure analysis of a state."""
+    def analysis(self, state: GraspState, parent: GraspState | None = None) -> StateAnalysis:
+        """The (cached) closure analysis of a state (``parent``: the state it was derived from, see
+        :class:`~planner.state.AnalysisCache`)."""
         with self.timings.measure("analysis"):
-            return self.cache(state)
+            return self.cache(state, parent)
 
     def reject(self, reason: str) -> None:
         """Count a transition refused for ``reason``."""
         self.rejections[reason] += 1
 
-    def held(self, state: GraspState) -> StateAnalysis | None:
-        """The analysis of a state whose contacts hold the object (18 for all-F), else None."""
+    def held(self, state: GraspState, parent: GraspState | None = None) -> StateAnalysis | None:
+        """The analysis of a state whose contacts hold the object (18 for all-F), else None
+        (``parent``: the state it was derived from, see :class:`~planner.state.AnalysisCache`)."""
         try:
-            sa = self.analysis(state)
+            sa = self.analysis(state, parent)
         except SceneError:
             self.reject("new grasp is geometrically inconsistent")
             return None

@@ -176,6 +176,36 @@ class _MotionCheck:
                 return False
         return self.model.object_clearance(position, rotation) >= self.object_floor
 
+    def all_valid(self, Q: Array, poses: Sequence[Pose]) -> bool:
+        """Whether :meth:`__call__` holds at every hand configuration of ``Q`` ``(N, M)`` with the
+        object at ``poses``: the joint limits, then the clearances of the fingers that
+        :meth:`CollisionModel.clearances_along` checks in one pass (all the states at once, equal to
+        one at a time), then the other fingers and the object state by state; the first violation
+        ends it (the answer is the same as checking state after state)."""
+        hand, model = self.model.hand, self.model
+        Q = np.asarray(Q, dtype=float)
+        F = range(len(hand.fingers))
+        for f in F:
+            qf = Q[:, hand.finger_slice(f)]
+            if not bool(np.all((qf >= self.limits[f][0] - 1e-9) & (qf <= self.limits[f][1] + 1e-9))):
+                return False
+        batched = [f for f in F if model.batched(f)]
+        if batched:
+            positions = np.array([p.position for p in poses]).reshape(len(poses), -1)  # (N, d)
+            rotations = np.array([p.rotation for p in poses]).reshape(len(poses), 3, 3)  # (N, 3, 3)
+            for f in batched:
+                if not bool(np.all(model.clearances_along(f, Q, positions, rotations, self.allow[f],
+                                                          self.touching[f]) >= -1e-9)):
+                    return False
+        for q, pose in zip(Q, poses, strict=True):
+            for f in F:
+                if f not in batched and model.finger_clearance(f, q, pose.position, pose.rotation, self.touching[f],
+                                                               self.allow[f]) < -1e-9:
+                    return False
+            if model.object_clearance(pose.position, pose.rotation) < self.object_floor:
+                return False
+        return True
+
 
 def integrate_object_motion(
     model: CollisionModel,
@@ -370,6 +400,13 @@ def plan_object_motion(
                 return False
         return check(x[:M], man.pose(x[M:]))
 
+    def all_valid(X: Array) -> bool:  # valid at every state of X (k, n), the fingers' clearances at once
+        if man.direction is not None:
+            t = np.array([float(man.direction @ x[M:]) for x in X])  # as valid computes it
+            if not bool(np.all((t >= -1e-9) & (t <= t1 + 1e-9))):
+                return False
+        return check.all_valid(X[:, :M], [man.pose(x[M:]) for x in X])
+
     if man.contact_rows == 0 or not valid(x0) or not valid(x1):
         return None
     if float(np.linalg.norm(man.function(x1))) > 100 * tolerance:
@@ -451,7 +488,7 @@ def plan_object_motion(
         X = _densify(man, X, DENSE_STEP, tolerance)
         step = float(np.max(np.abs(np.diff(X[:, :M], axis=0)))) if len(X) > 1 else 0.0
         residual = max(float(np.linalg.norm(man.function(x))) for x in X)
-        if step > DENSE_STEP or residual > 100 * tolerance or not all(valid(x) for x in X):
+        if step > DENSE_STEP or residual > 100 * tolerance or not all_valid(X):
             return None
         if float(np.max(np.abs(X[-1] - x1))) > 1e-6:
             return None

@@ -90,7 +90,7 @@ def release_edge(nodes: GraphNodes, state: GraspState, finger: int, checked: Rel
     """The release transition along the finger's ``path`` ``(n, M)`` and the state it leads to
     (the contacts ``keep``), or None when that state does not hold the object."""
     new = keep_contacts(state, keep, path[-1])
-    if nodes.held(new) is None:
+    if nodes.held(new, parent=state) is None:  # a whole finger let go: the others' contacts as they were
         return None
     grasp, cone = checked.grasp, checked.cone
     length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))

@@ -159,12 +159,32 @@ def state_scene_dict(base: Scene, state: GraspState, hand: HandKinematics) -> di
     return data
 
 
-def state_scene(base: Scene, state: GraspState, hand: HandKinematics) -> Scene:
+def state_scene(base: Scene, state: GraspState, hand: HandKinematics, geometry: bool = True) -> Scene:
     """A validated scene of the state (raises :class:`SceneError` if the state is inconsistent,
-    e.g. a contact point no longer on its body's surface)."""
+    e.g. a contact point no longer on its body's surface). ``geometry = False`` validates the
+    model only, not the contacts' geometry (:func:`analysis.loader.check_geometry`): for a state
+    whose contacts were all checked already in the same place (:func:`same_geometry`)."""
     if not state.contacts:
         raise SceneError(("contacts",), "a grasp state with no contacts has no scene")
-    return scene_from_dict(state_scene_dict(base, state, hand))
+    return scene_from_dict(state_scene_dict(base, state, hand), geometry)
+
+
+def same_geometry(parent: GraspState, state: GraspState, hand: HandKinematics) -> bool:
+    """Whether every contact of ``state`` is a contact of ``parent`` (the same record) on a body
+    that is where it was in ``parent`` (a fixed body, or a finger whose joints are those of
+    ``parent``), with the object where it was: the geometry of ``state``'s scene, each contact on
+    both surfaces with its normal in both normal cones, is then ``parent``'s (a finger released
+    and retreated, the others holding on). Exact comparisons: any change means no."""
+    if not (np.array_equal(parent.position, state.position) and np.array_equal(parent.rotation, state.rotation)):
+        return False
+    own = {id(c) for c in parent.contacts}
+    for c in state.contacts:
+        if id(c) not in own:
+            return False
+        f = hand.finger_of(c.body)
+        if f is not None and not np.array_equal(parent.q[hand.finger_slice(f)], state.q[hand.finger_slice(f)]):
+            return False
+    return True
 
 
 @dataclass
@@ -182,8 +202,10 @@ class StateAnalysis:
     _grasps: dict[str, StationaryGrasp | None] = field(default_factory=dict)
 
     @classmethod
-    def of(cls, base: Scene, state: GraspState, hand: HandKinematics) -> StateAnalysis:
-        scene = state_scene(base, state, hand)
+    def of(cls, base: Scene, state: GraspState, hand: HandKinematics, geometry: bool = True) -> StateAnalysis:
+        """The analysis of ``state`` (its scene's geometry checked unless ``geometry = False``,
+        :func:`state_scene`)."""
+        scene = state_scene(base, state, hand, geometry)
         return cls(state, scene, build_system(scene, hand, state.q))
 
     def parts(self, combination: str) -> CombinationParts:
@@ -220,12 +242,17 @@ class AnalysisCache:
         self.hits = 0
         self.misses = 0
 
-    def __call__(self, state: GraspState) -> StateAnalysis:
+    def __call__(self, state: GraspState, parent: GraspState | None = None) -> StateAnalysis:
+        """The analysis of ``state``; with ``parent``, a state whose scene was built and checked in
+        this cache, the contacts' geometry is not checked again where it is ``parent``'s
+        (:func:`same_geometry`)."""
         k = state.key()
         got = self._cache.get(k)
         if got is None or not np.allclose(got.state.q, state.q):
             self.misses += 1
-            got = StateAnalysis.of(self.base, state, self.hand)
+            known = parent is not None and self._cache.get(parent.key()) is not None and \
+                self._cache[parent.key()].state is parent and same_geometry(parent, state, self.hand)
+            got = StateAnalysis.of(self.base, state, self.hand, geometry=not known)
             self._cache[k] = got
         else:
             self.hits += 1

@@ -325,3 +325,23 @@ def test_frames_remembered_for_the_last_configuration_only() -> None:
         with pytest.raises(ValueError):
             Rs[0][0, 0] = 1.0  # read-only
     assert fresh.frames(qs[0])[1][2] is not chain.frames(qs[0])[1][2]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_point_jacobian_is_the_cross_product_of_each_world_axis_and_lever(seed: int) -> None:
+    """Column ``j`` of a body point's Jacobian is ``a_j x (x - p_j)`` (eq. 1) with the world axis
+    ``a_j = R_j axis_j`` and the joint origin ``p_j``, exactly as ``np.cross`` gives it (the chain
+    computes the three components itself), also when configurations alternate (its world axes are
+    remembered with the frames of the last one only)."""
+    rng = np.random.default_rng(50 + seed)
+    chain = random_spatial_chain(rng, "f")
+    qs = [rng.uniform(-np.pi, np.pi, chain.n_joints) for _ in range(3)]
+    for q in qs + qs[::-1]:
+        Rs, ps = chain.frames(q)
+        for k in range(chain.n_joints):
+            x = rng.uniform(-1, 1, 3)
+            J = chain.point_jacobian(k, x, q)
+            want = np.zeros((3, chain.n_joints))
+            for j in range(k + 1):
+                want[:, j] = np.cross(Rs[j] @ chain.axes[j], x - ps[j])
+            np.testing.assert_array_equal(J, want)

@@ -101,3 +101,21 @@ def test_sliding_regrasp_checks_equilibrium_per_generator(combination: str) -> N
             G[:, sel.c_slices[i].start] += system.G_blocks[i] @ (-system.mu[i] * s / np.linalg.norm(s))
         status, _, _ = scipy_lp(np.zeros(G.shape[1]), fs.C, np.zeros(fs.C.shape[0]), G, -system.w_ex)
         assert ok == (status == 0)
+
+
+@pytest.mark.parametrize(("name", "combination", "held"), [
+    ("planar_disk_envelope", "DDDFF", True),
+    ("planar_disk_envelope", "FDDDD", False),
+    ("sphere_four_finger_palm", "DDDDF", True),
+    ("sphere_four_finger_palm", "FFDDD", False),
+])
+def test_without_sliding_every_generator_shares_the_stationary_grasp(name: str, combination: str, held: bool) -> None:
+    """Without S-points the equilibrium of A' (33) does not depend on the motion: every generator is
+    feasible exactly when the remaining contacts hold the object, ``G_c f_c = -w_ex`` with ``f_c``
+    in the friction cones (one LP for all, here re-solved with scipy); both answers occur."""
+    p, rg = _cone(name, combination)
+    assert rg.exact and len(rg.directions()) > 0
+    status, _, _ = scipy_lp(np.zeros(p.st.G_c.shape[1]), p.fs.C, np.zeros(p.fs.C.shape[0]), p.st.G_c,
+                            -p.system.w_ex)
+    assert (status == 0) == held
+    np.testing.assert_array_equal(rg.feasible, np.full(len(rg.directions()), held))

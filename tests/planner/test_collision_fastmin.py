@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 
 import planner.collision as collision_mod
 from analysis.kinematics import BodyRef, HandKinematics
@@ -86,3 +87,73 @@ def test_many_configurations_at_once_equal_one_at_a_time(name: str) -> None:
             np.testing.assert_array_equal(got, np.array(want))
             if name != "baxter_hug_box":  # (its arms press on the box about q0: all in contact)
                 assert np.any(got < 0.0) and np.any(got >= 0.0)  # both verdicts occur
+
+
+@pytest.mark.parametrize("name", ["sphere_four_finger_palm", "sphere_four_finger_wrap"])
+def test_many_configurations_cull_link_pairs_by_their_bound(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``finger_clearances`` computes a link pair's distance only where its lower bound (midpoint
+    distance minus the half lengths) is below the minimum so far: curled fingers (joints 1.5 rad
+    about q0) bring some own pairs close, most stay far; the answers equal ``finger_clearance``
+    one configuration at a time, bit for bit, and both kinds of pair occur."""
+    scene = load_scene(ROOT / "examples" / f"{name}.json")
+    hand = HandKinematics.from_scene(scene)
+    model = CollisionModel.of(scene, hand)
+    pos = np.asarray(scene.object.pose.position, dtype=float)
+    rot = np.eye(3)
+    rng = np.random.default_rng(3)
+    rows = {"computed": 0, "all": 0}
+    orig = collision_mod.segment_segment_distances
+
+    def seg(*a: np.ndarray) -> np.ndarray:
+        rows["computed"] += len(a[0])
+        return orig(*a)
+
+    monkeypatch.setattr(collision_mod, "segment_segment_distances", seg)
+    for f in range(len(hand.fingers)):
+        sl = hand.finger_slice(f)
+        X = hand.q0[sl] + rng.normal(0.0, 1.5, (60, sl.stop - sl.start))
+        got = model.finger_clearances(f, hand.q0, X, pos, rot)
+        rows["all"] += 60 * len(model._finger_data(f).pairs)
+        mark = rows["computed"]  # the batch's rows (not the one-at-a-time calls below)
+        q = hand.q0.copy()
+        want = []
+        for x in X:
+            q[sl] = x
+            want.append(model.finger_clearance(f, q, pos, rot))
+        rows["computed"] = mark  # not the one-at-a-time calls
+        np.testing.assert_array_equal(got, np.array(want))
+    assert 0 < rows["computed"] < 0.5 * rows["all"]
+
+
+@pytest.mark.parametrize("name", ["sphere_four_finger_palm", "planar_disk_envelope", "sphere_wrap_three_link",
+                                  "panda_forearm_box", "baxter_hug_box"])
+def test_clearances_along_a_path_equal_one_state_at_a_time(name: str) -> None:
+    """``clearances_along`` (every joint and the object moving, as along an object motion: the hand
+    at random configurations about q0, the object shifted and turned) is ``finger_clearance`` of
+    each state, bit for bit, with the touching links and an allowance; the three-link wrap checks
+    its fingers against each other (pairs with the other fingers' links at each state), Baxter's
+    URDF chains go one state at a time. Both verdicts occur (the Panda's forearm lies on the box
+    and Baxter's arms press on it: overlaps everywhere)."""
+    scene = load_scene(ROOT / "examples" / f"{name}.json")
+    hand = HandKinematics.from_scene(scene)
+    model = CollisionModel.of(scene, hand)
+    d = scene.dim
+    rng = np.random.default_rng(17)
+    N = 30 if name != "baxter_hug_box" else 4
+    size = float(np.max(np.abs(np.asarray(scene.object.pose.position, dtype=float)))) + 1.0
+    Q = hand.q0 + rng.normal(0.0, 0.4, (N, hand.M))
+    P = np.asarray(scene.object.pose.position, dtype=float)[:d] + rng.normal(0.0, 0.02 * size, (N, d))
+    Rs = np.array([Rotation.from_rotvec(rng.normal(0.0, 0.2, 3) * ([0, 0, 1] if d == 2 else 1)).as_matrix()
+                   for _ in range(N)])
+    verdicts = set()
+    for f in range(len(hand.fingers)):
+        n_terms = model.clearance_terms(f, hand.q0, P[0], Rs[0]).size
+        allow = np.minimum(0.0, rng.normal(0.0, 0.01, n_terms))
+        tip = BodyRef(f"{hand.fingers[f].name}/{hand.fingers[f].n_joints - 1}", f, hand.fingers[f].n_joints - 1)
+        for touching, al in (((), None), ((tip,), allow)):
+            got = model.clearances_along(f, Q, P, Rs, al, touching)
+            want = [model.finger_clearance(f, Q[k], P[k], Rs[k], touching, al) for k in range(N)]
+            np.testing.assert_array_equal(got, np.array(want))
+            verdicts |= set((got >= 0.0).tolist())
+    if name not in ("baxter_hug_box", "panda_forearm_box"):
+        assert verdicts == {True, False}

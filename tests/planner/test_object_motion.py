@@ -76,3 +76,32 @@ def test_ompl_object_motion_refuses_a_colliding_goal(planar_scene: Scene, motion
     q_ok = before.q.copy()  # the same motion without the collision is planned
     goal_ok = ObjectMotion(np.array([before.q, q_ok]), goal.pose_path, goal.separations, 0.0, 0.0)
     assert plan_object_motion(model, before, goal_ok, keep, separating) is not None
+
+
+def test_object_motion_edges_are_lazy_with_a_lower_bound(planar_scene: Scene, planar_plan, motion_step) -> None:  # type: ignore[no-untyped-def]
+    """Expanding the state before the planar plan's lift gives its object motion as a lazy edge: the
+    node (the integration's end) is known before OMPL plans, the bound (straight joint and object
+    distances to that end, plus the effort) is below the cost the validation finds and within 1 %
+    of it for this straight lift, and the validated transition is the plan's step (same paths,
+    same cost)."""
+    from planner.goals import Goal
+    from planner.graph import ContactStateGraph
+
+    step, _, _ = motion_step
+    hand = HandKinematics.from_scene(planar_scene)
+    g = ContactStateGraph(planar_scene, hand, Goal(type="active"))
+    succ = [s for s in g.object_motion_edges(step.before) if g.states[s.node].bodies() == step.after.bodies()]
+    assert len(succ) == 1 and succ[0].validate is not None
+    s = succ[0]
+    assert s.node not in g.validated and s.node == step.after.key()
+    got = s.validate()
+    assert got is not None
+    cost, t = got
+    assert s.cost <= cost and cost - s.cost < 0.01 * cost
+    assert cost == step.transition.cost
+    np.testing.assert_array_equal(t.q_path, step.transition.q_path)
+    np.testing.assert_array_equal(t.object_path, step.transition.object_path)
+    assert s.node in g.validated
+    # the straight distances: the joint path and the object path each at least that long
+    jl = float(np.sum(np.linalg.norm(np.diff(t.q_path, axis=0), axis=1)))
+    assert jl >= float(np.linalg.norm(t.q_path[-1] - t.q_path[0]))

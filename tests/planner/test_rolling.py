@@ -66,6 +66,28 @@ def test_rolling_rows_jacobian_and_tangent_space() -> None:
     np.testing.assert_allclose(Nr @ Nr.T, Ng @ Ng.T, atol=1e-7)
 
 
+def test_rolling_jacobian_on_the_side_and_round_the_end_cap() -> None:
+    """The rolling rows' Jacobian (analytic: the foot parameter, the gap and the angles of the
+    centre's offset and of the axis) equals central differences (h = 1e-6, no angle wrap in
+    between) with the disk on the link's side (the foot inside the axis) and rolled past its end
+    round the cap (the foot held at the end, dt = 0), at random hand configurations."""
+    scene, hand, st = _setup()
+    roll = ContactManifold(hand, st, [0], scene=scene, rolling=True)
+    cap = solve_object(roll, st.q, -4.0)  # rolled 1.2 along the side: past the end at x = 1
+    rng = np.random.default_rng(5)
+    checked = {"side": 0, "cap": 0}
+    for s0 in (np.zeros(3), np.array([0.2, 0.0, -0.7]), cap):
+        for _ in range(10):
+            x = np.concatenate([st.q, s0]) + 0.02 * rng.standard_normal(hand.M + 3)
+            a, b = hand.body_segment(roll.rolls[0][1], x[: hand.M])
+            c = roll.pose(x[hand.M:]).position
+            t = float((c - a) @ (b - a)) / float((b - a) @ (b - a))
+            checked["side" if 0.0 < t < 1.0 else "cap"] += 1
+            Jn = np.column_stack([(roll.function(x + e) - roll.function(x - e)) / 2e-6 for e in 1e-6 * np.eye(len(x))])
+            np.testing.assert_allclose(roll.jacobian(x), Jn, rtol=0, atol=1e-7)
+    assert checked["side"] >= 10 and checked["cap"] >= 5
+
+
 @pytest.mark.parametrize("phi", [0.0, 0.2, -0.35])
 @pytest.mark.parametrize("dtheta", [0.05, -0.3, 0.8])
 def test_disk_rolls_on_link_side_exactly(phi: float, dtheta: float) -> None:
