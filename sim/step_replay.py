@@ -9,7 +9,8 @@ Each step is replayed from its own planned state (the scene of the state before 
   motion that exerts nothing on the object; it is not simulated.)
 * ``object_motion`` (30-32): the chosen torque of T is applied to the state before the step, with
   the step's combination as the expected contact states, until the object has travelled the
-  planned distance (``stop_distance``); its displacement is compared with the planned one.
+  planned distance (``stop_distance``), the fingers' damping lowered for the step's joint speeds
+  (``phi``, :func:`sim.mjcf.damping`); its displacement is compared with the planned one.
 
 The object's total displacement is the sum of the steps' displacements, compared with the plan's.
 Errors are position (scene units) and rotation (radians) apart, each relative to the planned
@@ -34,6 +35,7 @@ from analysis.pose import Pose
 from analysis.scene import Scene
 from planner.plan import Plan
 from planner.state import StateAnalysis, all_f, state_scene
+from sim.plan_paths import joint_speed_ratio
 from sim.plan_replay import PoseError
 from sim.torque_replay import simulate_torques
 
@@ -100,7 +102,8 @@ def replay_plan(scene: Scene, plan: Plan, hold_time: float = 0.1, hold_tol: floa
             assert t.tau is not None
             dist = float(np.linalg.norm(planned))  # |dr|, the stop distance of simulate_torques
             error: PoseError | None = None
-            res = simulate_torques(sc, t.tau, duration=motion_time, combination=t.combination, stop_distance=dist)
+            res = simulate_torques(sc, t.tau, duration=motion_time, combination=t.combination, stop_distance=dist,
+                                   phi=joint_speed_ratio(t.q_path, t.object_path))
             sim = np.asarray(res.dr, dtype=float)
             start = Pose.from_vector(t.object_path[0], scene.dim)
             error = PoseError.of(start, Pose.from_vector(t.object_path[-1], scene.dim), start.displaced(sim), size)

@@ -203,6 +203,7 @@ def simulate_torques(
     params: SimulationParams = DEFAULT_PARAMS,
     stop_distance: float | None = None,
     sample_every: int = 1,
+    phi: float | None = None,
 ) -> SimulationResult:
     """Apply constant joint torques ``tau`` ``(M,)`` (scene finger order; ``tau = J^T f`` for
     contact forces ``f`` the fingers apply on the object) together with the scene's external
@@ -218,7 +219,9 @@ def simulate_torques(
     ``stop_distance``: stop early once ``|dr|`` exceeds it (keeps the motion small, where the
     first-order analysis applies). ``sample_every``: contacts are read every this many steps.
     ``combination``: a string such as ``"FSDDD"``; each contact outcome then carries the expected
-    state and whether it agrees. Raises :class:`SceneError` for a wrong ``tau`` length, a
+    state and whether it agrees. ``phi``: the joint speed per unit object speed of the motion the
+    torque is for (eq. 31, ``TorqueSet.phi``), which lowers the fingers' damping where the joints
+    turn fast (:func:`sim.mjcf.damping`). Raises :class:`SceneError` for a wrong ``tau`` length, a
     non-positive duration or a bad combination.
     """
     hand = HandKinematics.from_scene(scene)
@@ -231,7 +234,7 @@ def simulate_torques(
 
     dim, D = scene.dim, scene.D
     s = object_size(scene)
-    model = build_model(scene, params, tau)
+    model = build_model(scene, params, tau, phi)
     data = mujoco.MjData(model)
     reset_to_scene(model, data)
     tracker = ContactTracker(scene, hand, model, params)
@@ -320,7 +323,7 @@ def simulate_torques(
         combination=comb,
         stopped_early=stopped,
         object_size=s,
-        damping=damping(scene, tau, params),
+        damping=damping(scene, tau, params, phi),
         params=params,
     )
 
