@@ -66,9 +66,20 @@ def _load(scene_path: Path) -> Any:
         sc = load_scene(scene_path)
     except SceneError as e:
         _fail(f"{scene_path}: {e}")
-    for note in sc.notes:
+    for note in (*sc.notes, *_unlisted_notes(sc)):
         err_console.print(f"[bold yellow]note:[/] {scene_path}: {note}", highlight=False, soft_wrap=True)
     return sc
+
+
+def _unlisted_notes(sc: Any) -> list[str]:
+    """Bodies lying on the object along a line or a patch of which the scene lists fewer points
+    (:func:`analysis.detect.unlisted_points`); none where the detector cannot take the scene."""
+    from analysis.detect import unlisted_points
+
+    try:
+        return [u.describe() for u in unlisted_points(sc)]
+    except CTPError:
+        return []
 
 
 def _check_out(path: Path | None, option: str) -> None:
