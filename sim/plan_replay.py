@@ -961,7 +961,13 @@ def _posture(run: _Run, hand: HandKinematics, step: PlanStep,
     points = [(ref_, c.point_body) for c, letter in zip(step.before.contacts, st.combination, strict=True)
               if letter != "D" and (ref_ := hand.resolve_body(c.body)) is not None and ref_.finger is not None]
     gains = run.gains(rate)
-    return lambda q: self_motion_torque(hand, points, q, ref(), gains)
+    b_self = run.b_posture - run.b_q  # (M,) the damping the self-motion keeps (sim.mjcf.damping)
+
+    def torque(q: Array) -> Array:
+        P = self_motion_projector(hand, points, q)  # (M, M)
+        return np.asarray(P @ (gains * (P @ (ref() - q))) - P @ (b_self * (P @ run.data.qvel[run.dadr])))
+
+    return torque
 
 
 def _object_motion(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, step: PlanStep,

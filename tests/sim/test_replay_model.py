@@ -69,3 +69,12 @@ def test_hold_rate_must_be_a_rate() -> None:
         PlanSimulationOptions(hold_rate=-1.0)
     with pytest.raises(ValueError, match="hold_rate"):
         PlanSimulationOptions(hold_rate=float("inf"))
+
+
+def test_simulate_torques_checks_its_hold_rate() -> None:
+    from analysis.exceptions import SceneError
+    from sim.torque_replay import simulate_torques
+
+    scene = load_scene(SPHERE)
+    with pytest.raises(SceneError, match="hold_rate"):
+        simulate_torques(scene, np.zeros(16), duration=0.01, hold_rate=-1.0)
