@@ -53,7 +53,9 @@ At every moment each finger is either
   at most 4 % of their holding torque). **Object motions never get the servo**: the object is
   moved by the plan's torque (32) and the self-motion posture, which moves no contact. The
   fingers' joint damping ``b_q`` is lowered during an object motion whose joints turn faster
-  than ``1/s`` per unit object motion (:func:`sim.mjcf.damping`, ``phi`` from the step's paths):
+  than ``1/s`` per unit object motion (:func:`sim.mjcf.damping`, ``phi`` from the step's paths),
+  in the joint motions that move the contacts (the self-motion keeps the nominal damping through
+  the posture torque, else a constant torque's self-motion part drifts the posture faster):
   the analysis' fingers are massless, and the damping's torque would otherwise load the contacts
   with forces the analysis does not have (the nine-contact wrap's lift, ``s phi = 3.15``). The
   replay states all this in :attr:`PlanSimulation.control`; or
