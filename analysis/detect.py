@@ -97,10 +97,12 @@ __all__ = [
     "LinkDistance",
     "NearMiss",
     "SceneGeometry",
+    "UnlistedPoints",
     "UnplacedScene",
     "detect_contacts",
     "link_distances",
     "link_refs",
+    "unlisted_points",
 ]
 
 
@@ -732,3 +734,49 @@ def _distinct(contacts: list[DetectedContact], hand: HandKinematics) -> list[Det
                 continue
         out.append(c)
     return out
+
+
+@dataclass(frozen=True)
+class UnlistedPoints:
+    """A body that touches the object along a line or a patch (``found`` points, the detector's
+    end points or corners, ``extent`` apart at most) of which the scene lists fewer (``listed``,
+    at least one)."""
+
+    body: str
+    listed: int
+    found: int
+    extent: float
+
+    def describe(self) -> str:
+        kind, ends, size = ("line", "end points", "long") if self.found == 2 else ("patch", "corners", "across")
+        them = "them as point contacts" if self.listed > 1 else "it as a point contact"
+        return (f"{self.body} lies on the object along a {kind} {self.extent:.3g} {size} ({self.found} {ends}) "
+                f"but the scene lists {self.listed} point{'s' if self.listed > 1 else ''} of it: the analysis takes "
+                f"{them}, about which the object may turn where the flat contact does not let it (in MuJoCo, "
+                f"on a robot); 'ctp contacts' lists the {kind}'s {ends}")
+
+
+def unlisted_points(scene: Scene, tolerance: float = FEATURE_TOL) -> tuple[UnlistedPoints, ...]:
+    """The bodies whose contact with the object at the scene's configuration is a line or a patch
+    (:func:`detect_contacts` within ``tolerance``, default the validation's accuracy) while the
+    scene lists fewer of its points: a link lying flat on a face given as one point (Baxter's
+    forearms in examples/baxter_hug_box.json; examples/baxter_hug_box_lines.json lists both end
+    points). Bodies the scene lists no contact on are not reported (the scene may leave them out)."""
+    det = detect_contacts(scene, tolerance=tolerance)
+    listed: dict[str, int] = {}
+    hand = HandKinematics.from_scene(scene)
+    for c in scene.contacts:
+        ref = hand.resolve_body(c.body)
+        name = c.body if ref is None else ref.name
+        listed[name] = listed.get(name, 0) + 1
+    points: dict[str, list[Array]] = {}
+    for dc in det.contacts:
+        points.setdefault(dc.body, []).append(np.asarray(dc.point, dtype=float))
+    out = []
+    for body, pts in points.items():
+        n = listed.get(body, 0)
+        if 0 < n < len(pts) and len(pts) >= 2:
+            P = np.array(pts)  # (k, d)
+            extent = float(np.max(np.linalg.norm(P[:, None, :] - P[None, :, :], axis=2)))
+            out.append(UnlistedPoints(body, n, len(pts), extent))
+    return tuple(out)

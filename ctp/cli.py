@@ -48,6 +48,10 @@ EXIT_OFF_PLAN = 3  # the replay ended outside its tolerance (ctp plan --replay: 
 POSTURE_RATE = 50.0
 POSTURE_HELP = ("plan replays: 1/s at which the hand's self-motion (joint motions that move no contact) "
                 "is held to the planned posture during object motions; 0: pure torque control")
+#: plan replays: the hold servo's rate (1/s) of sim.plan_replay.PlanSimulationOptions
+HOLD_RATE = 500.0
+HOLD_HELP = ("plan replays: 1/s of the joint servo that holds the touching fingers' contact-moving joint "
+             "motions while the grasp holds still (never during object motions); 0: torque control in holds too")
 
 
 def _fail(message: str, code: int = 2) -> NoReturn:
@@ -62,9 +66,20 @@ def _load(scene_path: Path) -> Any:
         sc = load_scene(scene_path)
     except SceneError as e:
         _fail(f"{scene_path}: {e}")
-    for note in sc.notes:
+    for note in (*sc.notes, *_unlisted_notes(sc)):
         err_console.print(f"[bold yellow]note:[/] {scene_path}: {note}", highlight=False, soft_wrap=True)
     return sc
+
+
+def _unlisted_notes(sc: Any) -> list[str]:
+    """Bodies lying on the object along a line or a patch of which the scene lists fewer points
+    (:func:`analysis.detect.unlisted_points`); none where the detector cannot take the scene."""
+    from analysis.detect import unlisted_points
+
+    try:
+        return [u.describe() for u in unlisted_points(sc)]
+    except CTPError:
+        return []
 
 
 def _check_out(path: Path | None, option: str) -> None:
@@ -340,24 +355,25 @@ def _plan_scene(plan_path: Path, data: dict[str, Any], scene_path: Path | None) 
         _fail(f"{plan_path}: scene.{e}")
 
 
-def _replay_options(posture_rate: float) -> Any:
-    """:class:`sim.plan_replay.PlanSimulationOptions` with ``--posture-rate`` (checked: exit 2)."""
+def _replay_options(posture_rate: float, hold_rate: float = HOLD_RATE) -> Any:
+    """:class:`sim.plan_replay.PlanSimulationOptions` with ``--posture-rate`` and ``--hold-rate``
+    (checked: exit 2)."""
     from sim.plan_replay import PlanSimulationOptions
 
     try:
-        return PlanSimulationOptions(posture_rate=posture_rate)
+        return PlanSimulationOptions(posture_rate=posture_rate, hold_rate=hold_rate)
     except ValueError as e:
-        _fail(str(e).replace("posture_rate", "posture-rate", 1))
+        _fail(str(e).replace("posture_rate", "posture-rate", 1).replace("hold_rate", "hold-rate", 1))
 
 
 def _simulate_plan_file(plan_path: Path, data: dict[str, Any], scene_path: Path | None,
-                        json_out: Path | None, posture_rate: float) -> None:
+                        json_out: Path | None, posture_rate: float, hold_rate: float = HOLD_RATE) -> None:
     """``ctp simulate PLAN.json``: the continuous replay of :func:`sim.plan_replay.simulate_plan`.
     Exit code 0 when the replay meets the plan, 1 if the object was dropped, 2 for bad input, 3 if
     it ended outside the tolerance (position or rotation)."""
     from sim.plan_replay import simulate_plan
 
-    options = _replay_options(posture_rate)
+    options = _replay_options(posture_rate, hold_rate)
     sc = _plan_scene(plan_path, data, scene_path)
     try:
         rep = simulate_plan(sc, data, options=options)
@@ -379,7 +395,8 @@ def _print_plan_simulation(rep: Any) -> None:
         who = f" ({s.driven_finger})" if s.driven_finger else ""
         console.print(f"step {s.index} {s.kind}{who} {s.combination}: object moved {_fmt(s.simulated, 5)} "
                       f"(planned {_fmt(s.planned, 5)}); off path {s.max_deviation:.2e}; "
-                      f"tracking {s.tracking_error:.1e} rad; {s.duration:.3f} s; {s.note}",
+                      f"tracking {s.tracking_error:.1e} rad; {s.duration:.3f} s; {s.note}"
+                      + (f"; hold servo {s.hold_servo:.2g} N m" if s.hold_servo > 0 else ""),
                       highlight=False, soft_wrap=True)
     console.print(f"final pose simulated {_fmt(rep.simulated_final_pose, 5)} vs planned "
                   f"{_fmt(rep.planned_final_pose, 5)}", highlight=False, soft_wrap=True)
@@ -387,6 +404,8 @@ def _print_plan_simulation(rep: Any) -> None:
                   f"largest regrasp drift {rep.max_regrasp_deviation:.2e} (object size {rep.object_size:.3g}); "
                   f"{rep.duration:.2f} s simulated", highlight=False, soft_wrap=True)
     console.print(f"final pose: {rep.error.describe(rep.tolerance)}", highlight=False, soft_wrap=True)
+    console.print(f"control: {rep.control}; largest hold servo torque {rep.hold_servo:.3g} N m "
+                  f"({rep.hold_servo_share:.1%} of the largest holding torque)", highlight=False, soft_wrap=True)
     console.print("dropped: " + (f"YES ({rep.drop_reason})" if rep.dropped else "no") + "; "
                   + ("within tolerance" if rep.ok else "NOT within tolerance"), highlight=False, soft_wrap=True)
 
@@ -405,6 +424,7 @@ def simulate(
     scene_file: Annotated[Path | None, typer.Option("--scene", help="plan files: the scene it was planned "
                                                                      "from (default: the file's 'scene')")] = None,
     posture_rate: Annotated[float, typer.Option(help=POSTURE_HELP)] = POSTURE_RATE,
+    hold_rate: Annotated[float, typer.Option(help=HOLD_HELP)] = HOLD_RATE,
 ) -> None:
     """Replay joint torques in MuJoCo (quasi-static) and report the object's motion and contacts;
     or, given a plan file, replay the whole plan in one simulation and compare the final pose with
@@ -422,7 +442,7 @@ def simulate(
     if plan_data is not None:
         if combination is not None or torque is not None or direction is not None:
             _fail("combination/torque/direction: do not apply to a plan file")
-        _simulate_plan_file(scene, plan_data, scene_file, json_out, posture_rate)
+        _simulate_plan_file(scene, plan_data, scene_file, json_out, posture_rate, hold_rate)
         return
     if scene_file is not None:
         _fail(f"scene: --scene is for plan files; {scene} is not a plan (no 'steps')")
@@ -430,6 +450,7 @@ def simulate(
     if duration <= 0:
         _fail(f"duration: {duration} must be positive")
     predicted = None
+    phi: float | None = None  # the joint speed per unit object speed of the analysed motion (eq. 31)
     try:
         if torque is not None:
             tau = _parse_vector(torque, "torque")
@@ -441,14 +462,15 @@ def simulate(
             if rep.torque is None:
                 _fail(f"combination {combination}: no torque set to replay ({rep.torque_error or rep.summary.reason})",
                       code=1)
-            tau, predicted = rep.torque.tau, rep.torque.direction
+            tau, predicted, phi = rep.torque.tau, rep.torque.direction, rep.torque.phi
             console.print(f"replaying the recommended member of T for {combination}: tau = {_fmt(tau)}; "
                           f"predicted direction {_fmt(predicted)}")
         else:
             _fail("torque: give --torque or --combination")
 
         result = simulate_torques(sc, tau, duration=duration, combination=combination,
-                                  stop_distance=stop_fraction * object_size(sc) if stop_fraction > 0 else None)
+                                  stop_distance=stop_fraction * object_size(sc) if stop_fraction > 0 else None,
+                                  phi=phi)
     except SceneError as e:
         _fail(str(e))
     except CTPError as e:
@@ -539,6 +561,7 @@ def plan(
     out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
     replay: Annotated[bool, typer.Option(help="replay the whole plan in MuJoCo (one continuous simulation)")] = False,
     posture_rate: Annotated[float, typer.Option(help="--replay: " + POSTURE_HELP)] = POSTURE_RATE,
+    hold_rate: Annotated[float, typer.Option(help="--replay: " + HOLD_HELP)] = HOLD_RATE,
 ) -> None:
     """Plan contact-state transitions from the scene's grasp to a goal: active or passive closure,
     fingertip contacts only, a combination (one letter per scene contact: D released, the others
@@ -608,7 +631,7 @@ def plan(
         from sim.plan_replay import simulate_plan
 
         try:
-            rep = simulate_plan(sc, result, options=_replay_options(posture_rate))
+            rep = simulate_plan(sc, result, options=_replay_options(posture_rate, hold_rate))
         except CTPError as e:
             _fail(f"replay: {e}", code=1)
         _print_plan_simulation(rep)

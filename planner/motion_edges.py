@@ -15,12 +15,13 @@ contacts on a link's side rolling, :func:`~planner.object_motion.motion_manifold
 planning (:func:`~planner.object_motion.plan_object_motion`); the state after it has the sliding
 and the rolling contacts where the motion left them (new points on the body and the object).
 Grasps with line contacts (a link touching with two or more points of one normal, a forearm lying
-along a box's side) and motions with sliding links move at most ``motion_step`` at a time.
+along a box's side) and motions with sliding links move at most ``motion_step`` at a time; any
+motion of F- and D-points ends where its one torque's forces keep half of their friction margin
+(:mod:`planner.motion_length`), and the next is analysed from there.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -32,9 +33,9 @@ from analysis.scene import Box, Polygon
 from analysis.torques import torque_set
 from planner.goals import pose_goal_remaining
 from planner.manifold import ContactManifold, pose_displacement
+from planner.motion_length import held_length, line_contacts, torque_margins, turned_normals
 from planner.nodes import GraphNodes
 from planner.object_motion import (
-    corner_normal,
     integrate_object_motion,
     keep_contacts,
     plan_object_motion,
@@ -145,6 +146,19 @@ def object_motion_edges(nodes: GraphNodes, state: GraspState) -> list[Successor]
         with nodes.timings.measure("motion"):
             straight = integrate_object_motion(nodes.model, state, ts.direction, ts.dq, keep, list(dset), dist,
                                                check_path=False, sliding=sset, motion_space=p.ms.Lambda_r_t)
+        # the one torque holds the sticking contacts only so far (planner.motion_length): the
+        # motion ends where its forces keep KEPT_MARGIN of their friction margin, re-analysed there
+        if straight is not None:
+            with nodes.timings.measure("analysis"):
+                margins = torque_margins(nodes, state, comb, keep, straight.q_path[-1], straight.pose_path[-1],
+                                         ts.tau)
+            held = dist if margins is None else held_length(dist, *margins)
+            if held < dist:
+                dist = held
+                with nodes.timings.measure("motion"):
+                    straight = None if not dist > 0 else integrate_object_motion(
+                        nodes.model, state, ts.direction, ts.dq, keep, list(dset), dist, check_path=False,
+                        sliding=sset, motion_space=p.ms.Lambda_r_t)
         if straight is None:
             nodes.reject("object motion leaves the contact manifold or its end collides")
             continue
@@ -263,13 +277,7 @@ def _torque_set(nodes: GraphNodes, p: Any, grasp: Any, oracle: Any, dr: Array) -
 def _line_contacts(nodes: GraphNodes, state: GraspState) -> bool:
     """Whether a finger link touches the object with two or more contacts of one normal (a line
     contact: the detector's end points of a link lying along a face)."""
-    seen: dict[tuple[str, tuple[float, ...]], int] = {}
-    for c in state.contacts:
-        if nodes.hand.finger_of(c.body) is None:
-            continue
-        key = (c.body, tuple(np.round(np.asarray(c.normal_object, dtype=float), 6)))
-        seen[key] = seen.get(key, 0) + 1
-    return any(n >= 2 for n in seen.values())
+    return line_contacts(nodes.hand, state.contacts)
 
 
 def _link_slide_sets(nodes: GraphNodes, state: GraspState) -> list[tuple[int, ...]]:
@@ -331,15 +339,7 @@ def _turned_normals(nodes: GraphNodes, state: GraspState) -> GraspState:
     contact keeps its point on the link and on the object (eq. 7), not the link's orientation, so
     a forearm across a box's edge rolls about it while the box moves; the normal stays valid while
     it lies in the object's normal cone there, which the new state's scene check decides."""
-    out = list(state.contacts)
-    for i, c in enumerate(state.contacts):
-        ref = nodes.hand.resolve_body(c.body)
-        if ref is None:
-            continue
-        n = corner_normal(nodes.scene, nodes.hand, ref, state.q, state.pose, c.point_object)
-        if n is not None:
-            out[i] = replace(c, normal_object=n)
-    return state.with_contacts(tuple(out))
+    return turned_normals(nodes.scene, nodes.hand, state)
 
 
 def _direction_candidates(nodes: GraphNodes, state: GraspState, p: Any, dset: tuple[int, ...],

@@ -12,7 +12,9 @@ contact point lies on its body and on the object) and:
   together, S-points touching), the combination has a stationary grasp, the direction is a DAFC
   member (22 by the LP oracle), the torque set (32) for it is not empty, and the chosen torque's
   contact forces satisfy (32) (residuals); every segment of the object path lies within 0.99
-  cosine of that re-analysed direction (the object goes where its torque moves it); for a 2-D disk
+  cosine of that re-analysed direction (the object goes where its torque moves it); for F- and
+  D-points, the chosen torque's contact forces stay in the friction set (16) at every eighth of
+  the path (the torque holds the contacts all along, :func:`_torque_hold_problems`); for a 2-D disk
   every sticking contact on a link's side rolls: at every waypoint the disk touches the link (gap
   zero) and the arc the contact point travelled on the link equals ``r`` times the disk's turn
   relative to the link, and the state after the step has the contact at the rolled point
@@ -39,9 +41,10 @@ from analysis.scene import Disk, Scene
 from analysis.torques import torque_set
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel, path_clearance_certified
 from planner.manifold import pose_displacement
+from planner.motion_length import line_contacts, torque_margin, waypoint_state
 from planner.object_motion import MIN_DIRECTION_COSINE, direction_cosines, motion_manifold, rolls_on_links
 from planner.plan import Plan, PlanStep
-from planner.state import StateAnalysis, all_f
+from planner.state import GraspState, StateAnalysis, all_f
 
 
 def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]:
@@ -103,6 +106,7 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
                 problems.extend(_direction_problems(step, np.asarray(ts.direction, float), tag))
             except CTPError as e:
                 problems.append(f"{tag}: torque set (32) empty: {e}")
+        problems.extend(_torque_hold_problems(scene, hand, step, tag))
         problems.extend(_penetration_problems(scene, hand, step, tag))
     return problems
 
@@ -119,6 +123,45 @@ def _direction_problems(step: PlanStep, direction: Array, tag: str) -> list[str]
     if cos[k] < MIN_DIRECTION_COSINE:
         return [f"{tag}: object path segment {k} leaves the analysed direction (cosine {cos[k]:.4f} < "
                 f"{MIN_DIRECTION_COSINE})"]
+    return []
+
+
+#: waypoints of an object motion at which :func:`_torque_hold_problems` re-computes the forces
+TORQUE_HOLD_WAYPOINTS = 8
+
+
+def _torque_hold_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
+    """The step's one torque keeps the sticking contacts in their friction set (16) all along its
+    motion: at :data:`TORQUE_HOLD_WAYPOINTS` waypoints, evenly spaced to the last, the contact
+    forces it produces there (:func:`analysis.torque_forces.torque_forces`, eq. 29 with ``W_2`` of
+    22) exist and have a margin >= 0 (:mod:`planner.motion_length`). Combinations of F- and
+    D-points without line contacts only (an S-point's kinetic friction needs its slip, which the
+    path does not record; line contacts: :mod:`planner.motion_length`). A waypoint before the last
+    whose grasp the scene check rejects is passed over: a forearm across a box's edge has its
+    normal turned to the link's surface (:func:`planner.motion_length.turned_normals`) only at the
+    states the planner analyses, in between it snaps to a face (the Panda's pivot); the last
+    waypoint, the state after the step, must be analysable."""
+    t = step.transition
+    keep = [i for i, ch in enumerate(t.combination) if ch != "D"]
+    if set(t.combination) - {"F", "D"} or t.tau is None or line_contacts(hand, [step.before.contacts[i] for i in keep]):
+        return []
+    n = len(t.q_path)
+
+    def analyse(state: GraspState) -> StateAnalysis:
+        return StateAnalysis.of(scene, state, hand)
+
+    for k in sorted({round(j * (n - 1) / TORQUE_HOLD_WAYPOINTS) for j in range(1, TORQUE_HOLD_WAYPOINTS + 1)}):
+        try:
+            there = waypoint_state(scene, hand, step.before, keep, t.q_path[k], t.object_path[k])
+            margin = torque_margin(analyse, there, "F" * len(keep), t.tau)
+        except CTPError as e:
+            if k < n - 1:  # a corner's normal between the states the planner analyses (see above)
+                continue
+            return [f"{tag}: at waypoint {k} the grasp cannot be analysed: {e}"]
+        if margin < 0.0:
+            return [f"{tag}: at waypoint {k} of {n} the chosen torque's contact forces leave the friction set "
+                    f"(16) by {-margin:.3g} N" if np.isfinite(margin) else
+                    f"{tag}: at waypoint {k} of {n} no contact forces produce the chosen torque"]
     return []
 
 

@@ -79,15 +79,24 @@ object's velocity is therefore the unbalanced wrench in the Euclidean metric of 
 coordinates, the metric in which DAFC directions are unit vectors. Masses and inertias are
 small (time constants ``m / b`` of ``inertia_time``, a millisecond), so the response to a change
 of force settles within a few milliseconds. Finger joints are damped lightly,
-``b_q = 0.04 b_r s^2`` (``s`` the object size, the scale of the fingers' lever arms), so that
-the torque spent on damping the fingers, ``b_q |dq/dt|``, is a few per cent of the torque that
-reaches the contacts, at any scene scale. Masses scale with the damping, so contact stiffness
-scales with the forces and penetrations stay near ``1e-5 s``. MuJoCo's ``discrete`` integrator
-solves the contacts in the metric ``M + h D`` that includes this damping (the constraint forces
-are computed against the same damped inertia that performs the update; ``implicitfast`` gives
-the same directions to about 1e-3 at the default parameters), and the contacts are stiff
-(``solref`` time constant 5 steps, ``solimp`` impedance 0.99-0.999, ``impratio`` 10 so that
-sticking friction creeps little).
+``b_q = 0.04 b_r s^2 / max(1, (s phi)^2)`` (``s`` the object size, the scale of the fingers' lever
+arms; ``phi`` the joint speed per unit object speed of the fastest object motion the run
+replays, eq. 31's ``phi = |dq|`` for a unit ``dr``), so that the power the fingers' damping
+takes, ``b_q |dq/dt|^2``, is at most 4 % of the object's, ``b_r |dr/dt|^2``, at any scene scale
+and however fast the fingers turn. The analysis' fingers are massless and undamped (``tau = J_c^T
+f_c``, eq. 29): the damping's torque ``b_q dq/dt`` is balanced by contact forces the analysis does
+not have, tangential ones at the tips of fast-turning joints. With ``b_q = 0.04 b_r s^2`` alone
+the wrap's lift (examples/sphere_four_finger_wrap.json, ``s phi = 3.1``: the fingers' abduction
+joints turn 4.2 rad per unit object motion about axes 0.12 m from their tips) put 28 % of the
+power into the fingers, and its sticking contacts would have needed ``|t|/n = 1.12`` at f4/2 and
+0.32 at the tips f1/3 and f3/3 where the analysis has 0 (the rigid damped model, constraint forces
+from ``A^T lambda = [tau; w_ex] - B [dq; dr]``): f4/2 slid from the start in MuJoCo. Masses
+scale with the damping, so contact stiffness scales with the forces and penetrations stay near
+``1e-5 s``. MuJoCo's ``discrete`` integrator solves the contacts in the metric ``M + h D`` that
+includes this damping (the constraint forces are computed against the same damped inertia that
+performs the update; ``implicitfast`` gives the same directions to about 1e-3 at the default
+parameters), and the contacts are stiff (``solref`` time constant 5 steps, ``solimp`` impedance
+0.99-0.999, ``impratio`` 10 so that sticking friction creeps little).
 
 """
 
@@ -133,7 +142,7 @@ class SimulationParams:
     integrator: str = "discrete"
     speed_rel: float = 2.0  # object sizes per second under a net force of the force scale
     inertia_time: float = 1e-3  # inertia / damping of object and fingers (s); masses follow
-    finger_damping_rel: float = 0.04  # b_q = finger_damping_rel * b_r * s^2 per joint
+    finger_damping_rel: float = 0.04  # b_q = finger_damping_rel * b_r * s^2 / max(1, (s phi)^2) per joint
     eps_rel: float = 0.01  # collision radius of lines/segments, fraction of s
     detect_rel: float = 0.02  # contact detection distance (inactive below it), fraction of s
     solref_timeconst: float = 1e-3  # contact spring-damper time constant (s), 5 steps
@@ -165,9 +174,9 @@ class Damping:
     object_damping: float  # b_r = F / (speed_rel s), every object coordinate
     object_mass: float  # = inertia_time * b_r
     object_inertia: float  # isotropic about p_o, = inertia_time * b_r (the same number)
-    finger_damping: float  # b_q = finger_damping_rel * b_r * s^2 per joint (torque per rad/s)
-    finger_armature: float  # rotor inertia per joint, inertia_time * b_q / 2
-    link_mass: float  # per link, at its joint: inertia_time * b_q / (2 s^2)
+    finger_damping: float  # b_q = finger_damping_rel * b_r * s^2 / max(1, (s phi)^2) per joint (torque per rad/s)
+    finger_armature: float  # rotor inertia per joint, inertia_time * b_q0 / 2 (b_q0: the damping at phi <= 1/s)
+    link_mass: float  # per link, at its joint: inertia_time * b_q0 / (2 s^2)
     link_inertia: float  # link_mass * (s / 10)^2
 
 
@@ -184,23 +193,38 @@ def force_scale(scene: Scene, tau: Array | None = None) -> float:
     return F if F > 0 else 1.0
 
 
-def damping(scene: Scene, tau: Array | None = None, params: SimulationParams = DEFAULT_PARAMS) -> Damping:
-    """The damping, masses and inertias :func:`simulate_torques` uses for these torques."""
+def damping(scene: Scene, tau: Array | None = None, params: SimulationParams = DEFAULT_PARAMS,
+            phi: float | None = None) -> Damping:
+    """The damping, masses and inertias of a run with these torques ``tau`` ``(M,)`` whose object
+    motion turns the joints ``phi`` (rad per unit of ``|dr|``, eq. 31; ``None``: no object motion
+    known) per unit object motion: ``b_q = finger_damping_rel b_r s^2 / max(1, (s phi)^2)`` (the
+    module docstring); the fingers' masses and armature are those of the nominal damping
+    ``finger_damping_rel b_r s^2`` whatever ``phi`` (so the continuous replay, which lowers the
+    damping only while an object moves, keeps one set of masses)."""
     s = object_size(scene)
     F = force_scale(scene, tau)
     b_r = F / (params.speed_rel * s)
-    b_q = params.finger_damping_rel * b_r * s * s
-    link_mass = params.inertia_time * b_q / (2.0 * s * s)
+    b_q0 = params.finger_damping_rel * b_r * s * s
+    b_q = b_q0 / joint_speed_factor(s, phi)
+    link_mass = params.inertia_time * b_q0 / (2.0 * s * s)
     return Damping(
         force_scale=F,
         object_damping=b_r,
         object_mass=params.inertia_time * b_r,
         object_inertia=params.inertia_time * b_r,
         finger_damping=b_q,
-        finger_armature=0.5 * params.inertia_time * b_q,
+        finger_armature=0.5 * params.inertia_time * b_q0,
         link_mass=link_mass,
         link_inertia=link_mass * (0.1 * s) ** 2,
     )
+
+
+def joint_speed_factor(s: float, phi: float | None) -> float:
+    """``max(1, (s phi)^2)``: by how much the finger damping is lowered for object motions that
+    turn the joints ``phi`` (rad per unit object motion) with lever arms of the object size ``s``."""
+    if phi is None or not np.isfinite(phi):
+        return 1.0
+    return max(1.0, (s * float(phi)) ** 2)
 
 
 # --------------------------------------------------------------------------------------------
@@ -455,17 +479,19 @@ def _geom_mu(scene: Scene, hand: HandKinematics, body: str, default: float) -> f
     return float(np.mean(mus)) if mus else float(default)
 
 
-def build_mjcf(scene: Scene, params: SimulationParams = DEFAULT_PARAMS, tau: Array | None = None) -> str:
+def build_mjcf(scene: Scene, params: SimulationParams = DEFAULT_PARAMS, tau: Array | None = None,
+               phi: float | None = None) -> str:
     """MJCF (XML text) of the scene at its configuration; see the module docstring.
 
     ``tau`` ``(M,)``: the joint torques the model is for (they set the force scale, hence
-    damping and masses; :func:`damping`). The keyframe ``"scene"`` holds the scene's
+    damping and masses; :func:`damping`); ``phi``: the joint speed per unit object speed of its
+    fastest object motion (the fingers' damping, :func:`damping`). The keyframe ``"scene"`` holds the scene's
     configuration (object pose, finger ``q``); the model's reference configuration ``qpos0`` has
     the object at its scene pose and ``q = 0``.
     """
     hand = HandKinematics.from_scene(scene)
     s = object_size(scene)
-    der = damping(scene, tau, params)
+    der = damping(scene, tau, params, phi)
     eps = params.eps_rel * s
     dim = scene.dim
     assets: list[str] = []
@@ -581,9 +607,10 @@ def _xml_escape(text: str) -> str:
     return text.replace("&", "&amp;").replace('"', "&quot;").replace("<", "&lt;").replace(">", "&gt;")
 
 
-def build_model(scene: Scene, params: SimulationParams = DEFAULT_PARAMS, tau: Array | None = None) -> mujoco.MjModel:
+def build_model(scene: Scene, params: SimulationParams = DEFAULT_PARAMS, tau: Array | None = None,
+                phi: float | None = None) -> mujoco.MjModel:
     """Compile :func:`build_mjcf`."""
-    return mujoco.MjModel.from_xml_string(build_mjcf(scene, params, tau))
+    return mujoco.MjModel.from_xml_string(build_mjcf(scene, params, tau, phi))
 
 
 def finger_qpos_addresses(model: mujoco.MjModel, scene: Scene) -> NDArray[np.int64]:
@@ -655,6 +682,7 @@ __all__ = [
     "force_scale",
     "geom_of_contact",
     "joint_name",
+    "joint_speed_factor",
     "link_body_name",
     "link_geom_name",
     "link_site_names",

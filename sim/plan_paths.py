@@ -24,6 +24,15 @@ from sim.torque_replay import smooth_ramp
 Mask = NDArray[np.bool_]
 
 
+def joint_speed_ratio(q_path: Array, object_path: Array) -> float | None:
+    """``phi`` of an object motion (eq. 31: joint speed per unit object speed): the joint path's
+    length ``sum |dq|`` ``(n, M)`` over the object path's ``sum |dr|`` ``(k, D)``, pose-vector
+    differences (the paper's metric of ``dr``); ``None`` when the object does not move."""
+    L_r = float(np.sum(np.linalg.norm(np.diff(np.asarray(object_path, dtype=float), axis=0), axis=1)))
+    L_q = float(np.sum(np.linalg.norm(np.diff(np.asarray(q_path, dtype=float), axis=0), axis=1)))
+    return L_q / L_r if L_r > 0 else None
+
+
 def path_deviation(pose: Pose, path: Array, s: float) -> float:
     """Distance of ``pose`` from the polyline of pose vectors ``path`` ``(k, D)``: on every segment
     the nearest point is found in the weighted coordinates ``(p, s rot)``, the distance is

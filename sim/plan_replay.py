@@ -36,7 +36,29 @@ At every moment each finger is either
   which is zero on the planned path. It acts during object motions (the contacts the step keeps)
   and while the grasp holds: the start ramp (every contact of the start), a release (the
   contacts it keeps, at the configuration before), a contact (the grasp before, then the grasp
-  with the new contact at the planned end) and the optional ``final_hold``; or
+  with the new contact at the planned end) and the optional ``final_hold``. While the grasp
+  holds still (releases, contacts, the final hold; not the start ramp, while the load comes on),
+  a **joint servo** (``options.hold_rate``, stiffness ``hold_rate b_q``, the Allegro's 3.1 N m/rad
+  at the default 500/s, a real Allegro's servo of about 3 N m/rad) also holds the joint motions
+  that move the contact points, at the configuration the hold starts from (the simulated one: a
+  hold does not undo an earlier step's error). A hold is the place a plan claims that its holding
+  torque (18) balances the object; that torque does no first-order work along any motion its
+  sticking contacts allow (``G f = -w_ex``, ``tau = J^T f``), so under torque control alone a hold
+  is neutral to first order and decided by second-order geometry the analysis does not model
+  (point contacts glued; MuJoCo's tip spheres roll): the Allegro's four-tip grasp drifts 66 um in
+  its 0.09 s and 0.81 mm in 0.2 s more, at a growing rate, a figure of the hold's length, not of
+  the plan. A real hand holds its posture with a servo and the plan's torque as feed-forward; the
+  servo's largest torque is reported (``hold_servo``, per step and over the run against the
+  largest holding torque), and a stationary grasp leaves it little to do (the bundled plans:
+  at most 4 % of their holding torque). **Object motions never get the servo**: the object is
+  moved by the plan's torque (32) and the self-motion posture, which moves no contact. The
+  fingers' joint damping ``b_q`` is lowered during an object motion whose joints turn faster
+  than ``1/s`` per unit object motion (:func:`sim.mjcf.damping`, ``phi`` from the step's paths),
+  in the joint motions that move the contacts (the self-motion keeps the nominal damping through
+  the posture torque, else a constant torque's self-motion part drifts the posture faster):
+  the analysis' fingers are massless, and the damping's torque would otherwise load the contacts
+  with forces the analysis does not have (the nine-contact wrap's lift, ``s phi = 3.15``). The
+  replay states all this in :attr:`PlanSimulation.control`; or
 * **driven** (it has no contact: it is moving to or from the object along its planned joint
   path, or waiting): it follows the planned joint waypoints *kinematically*. Before every
   MuJoCo step its joints' ``qpos`` is set to the path at ``t``, ``qvel`` to the path's velocity
@@ -156,10 +178,19 @@ from sim.mjcf import (
     finger_dof_addresses,
     finger_qpos_addresses,
     force_scale,
+    joint_speed_factor,
     object_pose,
     reset_to_scene,
 )
-from sim.plan_paths import Mask, arc_fractions, driven_profile, interp_rows, move_time, path_deviation
+from sim.plan_paths import (
+    Mask,
+    arc_fractions,
+    driven_profile,
+    interp_rows,
+    joint_speed_ratio,
+    move_time,
+    path_deviation,
+)
 from sim.torque_replay import self_motion_projector, self_motion_torque, smooth_ramp
 
 # --------------------------------------------------------------------------------------------
@@ -191,6 +222,17 @@ class PlanSimulationOptions:
     #: torques; the same holds while a grasp holds still, the start and regrasps); 0: pure torque
     #: control, the paper's model alone
     posture_rate: float = 50.0
+    #: 1/s; > 0 holds, while the grasp holds still (releases, contacts, the final hold; not during
+    #: the start ramp, while the load comes on, nor ever during an object motion, which the plan's
+    #: torque alone must produce), the joint motions of the touching fingers that move
+    #: their contact points at the configuration the hold starts from, gains ``hold_rate * b_q``
+    #: (stiffness, N m/rad): a real hand's joint servo holding its posture. The analysis' holding
+    #: torque (18) does no first-order work along any motion its sticking contacts allow, so under
+    #: torque control alone a hold is decided at second order, by the geometry of the contacts
+    #: (MuJoCo's tip spheres roll): the Allegro's four-tip grasp drifts on at millimetres per
+    #: second. The servo's largest torque is reported per step (``hold_servo``): a stationary
+    #: grasp needs none of it; 0: pure torque control in holds too
+    hold_rate: float = 500.0
     #: seconds the final grasp goes on holding (its holding torque, the posture torque) after the
     #: last step, a check of how it keeps the object; the final pose is taken after it (0: none)
     final_hold: float = 0.0
@@ -202,6 +244,8 @@ class PlanSimulationOptions:
             raise ValueError(f"final_hold: must be a finite time >= 0 in s (got {self.final_hold!r})")
         if not (self.posture_rate >= 0 and np.isfinite(self.posture_rate)):
             raise ValueError(f"posture_rate: must be a finite rate >= 0 in 1/s (got {self.posture_rate!r})")
+        if not (self.hold_rate >= 0 and np.isfinite(self.hold_rate)):
+            raise ValueError(f"hold_rate: must be a finite rate >= 0 in 1/s (got {self.hold_rate!r})")
 
 
 DEFAULT_OPTIONS = PlanSimulationOptions()
@@ -314,6 +358,9 @@ class StepSimulation:
     duration: float  # simulated seconds
     dropped: bool
     note: str
+    #: N m, the largest torque of the hold servo in the step (``PlanSimulationOptions.hold_rate``;
+    #: 0 during object motions, which have none): what the holding torque left to the servo
+    hold_servo: float = 0.0
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -322,6 +369,7 @@ class StepSimulation:
             "simulated": self.simulated.tolist(), "max_deviation": self.max_deviation,
             "tracking_error": self.tracking_error, "joint_error": self.joint_error,
             "duration": self.duration, "dropped": self.dropped, "note": self.note,
+            "hold_servo": self.hold_servo,
         }
 
 
@@ -347,6 +395,18 @@ class PlanSimulation:
     final_q: Array | None = None
     start_contacts: dict[str, Array] | None = None
     final_contacts: dict[str, Array] | None = None
+    #: how the hand was controlled, in words (:func:`control_model`), for the replay's output
+    control: str = ""
+    #: N m: the hold servo's largest torque anywhere in the run (start ramp, steps, final hold) and
+    #: the largest joint torque of the plan's holding torques (18), which a stationary grasp needs
+    hold_servo: float = 0.0
+    holding_torque: float = 0.0
+
+    @property
+    def hold_servo_share(self) -> float:
+        """The hold servo's largest torque over the largest holding torque (no unit; 0 without
+        either): how much of holding the object the servo, not the plan's torque, did."""
+        return self.hold_servo / self.holding_torque if self.holding_torque > 0 else 0.0
 
     @property
     def planned(self) -> Array:
@@ -397,6 +457,8 @@ class PlanSimulation:
             "max_regrasp_deviation": self.max_regrasp_deviation, "tracking_error": self.tracking_error,
             "object_size": self.object_size, "force_scale": self.force_scale, "duration": self.duration,
             "steps": [s.to_json() for s in self.steps], "object_path": self.object_path.to_json(),
+            "control": self.control, "hold_servo": self.hold_servo, "holding_torque": self.holding_torque,
+            "hold_servo_share": self.hold_servo_share,
         }
 
 
@@ -423,7 +485,11 @@ class _Run:
         self.h = float(params.timestep)
         self.qadr = finger_qpos_addresses(self.model, scene)  # (M,)
         self.dadr = finger_dof_addresses(self.model, scene)  # (M,)
-        self.b_q = np.array(self.model.dof_damping[self.dadr])  # (M,)
+        self.b_q = np.array(self.model.dof_damping[self.dadr])  # (M,) the joints' damping now
+        #: (M,) the nominal finger damping, the posture and servo gains per unit rate: an object motion
+        #: lowers ``b_q`` for its joint speeds (joint_damping), the posture holds as stiffly
+        self.b_posture = self.b_q.copy()
+        self.lowered: list[float] = []  # the factors by which object motions lowered the damping
         self.obj_id = self.model.body(OBJECT_BODY).id
         self.obj_geom = self.model.geom(OBJECT_GEOM).id
         self.xfrc = external_xfrc(scene)  # (6,)
@@ -444,6 +510,21 @@ class _Run:
         self.time_limit: float | None = None  # wall-clock seconds the run may take (simulate_plan)
         self.deadline = math.inf  # time.monotonic() at which the run stops
         self.mj_steps = 0
+        self.hold_servo = 0.0  # N m, the hold servo's largest torque in the step (_hold_posture)
+        self.hold_servo_max = 0.0  # N m, and in the whole run
+
+    def joint_damping(self, factor: float) -> None:
+        """Set the fingers' joint damping to the nominal one over ``factor`` (>= 1): an object
+        motion whose joints turn fast (:func:`sim.mjcf.damping`); 1 restores it."""
+        self.b_q = self.b_posture / factor
+        self.model.dof_damping[self.dadr] = self.b_q
+        if factor > 1.0:
+            self.lowered.append(factor)
+
+    def gains(self, rate: float) -> Array:
+        """``rate * b_posture`` ``(M,)`` (N m/rad), the stiffness of a posture or servo torque, at
+        most ``STABLE_GAIN b_q / h`` (the torque is explicit, evaluated before each MuJoCo step)."""
+        return np.minimum(rate * self.b_posture, STABLE_GAIN * self.b_q / self.h)
 
     def sample(self) -> None:
         """Record the object's pose now in the path (replacing a sample of the same step taken at
@@ -651,7 +732,10 @@ def simulate_plan(
     busy0 = _fingers_touching(hand, first.contacts_before)
     free0 = _mask(hand, set(range(len(hand.fingers))) - busy0)
     before = steps[0].before
-    run.posture = _hold_posture(run, hand, _finger_points(hand, before.contacts, "F" * before.L), first.q_path[0])
+    # no servo while the load comes on: the contacts settle into MuJoCo's geometry (a link across a
+    # box's edge starts eps (sqrt 2 - 1) short of the shrunk box and closes the gap under its torque)
+    run.posture = _hold_posture(run, hand, _finger_points(hand, before.contacts, "F" * before.L), first.q_path[0],
+                                servo=False)
     try:
         run.ramp_to(hold0, first.object_path[:1], free0, first.q_path[0], wrench=True)
     except _Drop as e:
@@ -665,7 +749,7 @@ def simulate_plan(
         st = step.transition
         nxt = steps[i + 1].transition if i + 1 < len(steps) else None
         t0, pose0 = run.t, run.pose()
-        run.max_dev, run.track, run.step_index = 0.0, 0.0, step.index
+        run.max_dev, run.track, run.step_index, run.hold_servo = 0.0, 0.0, step.index, 0.0
         run.posture = None  # an object motion sets its own (options.posture_rate)
         if st.kind != "object_motion":  # the contacts the regrasp keeps hold at the planned posture
             letters = st.combination if st.kind == "release" else "F" * step.before.L  # a release's D lets go
@@ -728,7 +812,7 @@ def simulate_plan(
             driven_finger=None if finger is None else hand.fingers[finger].name,
             planned=planned, simulated=run.pose().vector() - pose0.vector(), max_deviation=run.max_dev,
             tracking_error=run.track, joint_error=float(np.max(np.abs(run.q() - st.q_path[-1]))),
-            duration=run.t - t0, dropped=dropped, note=note,
+            duration=run.t - t0, dropped=dropped, note=note, hold_servo=run.hold_servo,
         ))
         run.sample()  # the pose this step's simulated displacement ends at
     if not dropped and options.final_hold > 0:
@@ -748,7 +832,16 @@ def simulate_plan(
         simulated_final_pose=run.pose().vector(), object_size=s, force_scale=run.F, dropped=dropped,
         drop_reason=reason, duration=run.t, tolerance=options.tolerance, object_path=run.object_path(),
         start_q=start_q, final_q=run.q(), start_contacts=start_contacts, final_contacts=run.object_contacts(),
+        control=control_model(options, run), hold_servo=run.hold_servo_max,
+        holding_torque=max((float(np.max(np.abs(t.tau_stationary), initial=0.0)) for st_ in steps
+                            if (t := st_.transition).tau_stationary is not None), default=0.0),
     )
+
+
+#: a posture or servo stiffness ``K`` is at most this times ``b_q / h`` (``h`` the time step): the
+#: torque is computed before each step from the configuration then, so ``K h / b_q`` must stay well
+#: below 2 (the default rates give 0.01 and 0.1; the wrap's lowered finger damping raises them 9.6x)
+STABLE_GAIN = 0.5
 
 
 #: MuJoCo steps between two evaluations of the self-motion projector of a holding grasp (its
@@ -761,6 +854,26 @@ HOLD_PROJECTOR_EVERY = 25
 #: torque takes it along its path) lasts the finger's move time ``T`` with the posture rate raised
 #: to at least this many over ``T`` (1/s), so the finger keeps up with its path
 LINK_RELEASE_TIME_CONSTANTS = 3.0
+
+
+def control_model(options: PlanSimulationOptions, run: _Run) -> str:
+    """The replay's model of the hand, in words (the module docstring, "Control of the hand")."""
+    holds = "holds: the planned holding torque (18)"
+    if options.hold_rate > 0:
+        k = float(np.max(run.gains(options.hold_rate), initial=0.0))
+        holds += (f" and a joint servo ({options.hold_rate:g}/s, {k:.3g} N m/rad) on the touching fingers' joint "
+                  "motions that move their contacts, about the configuration each hold starts from")
+    else:
+        holds += ", torque control only"
+    motions = "object motions: the plan's torque (32)"
+    if options.posture_rate > 0:
+        holds += f"; self-motion posture {options.posture_rate:g}/s"
+        motions += f" and the self-motion posture ({options.posture_rate:g}/s), no servo"
+    else:
+        motions += " only"
+    damp = (f"; finger damping lowered {min(run.lowered):.3g}-{max(run.lowered):.3g}x during the object motions "
+            "whose joints turn faster than 1/s per unit object motion" if run.lowered else "")
+    return f"{holds}; {motions}{damp}"
 
 
 def _after(run: _Run, profile: Callable[[float], Array]) -> Callable[[], Array]:
@@ -778,17 +891,27 @@ def _finger_points(hand: HandKinematics, contacts: Sequence[Any], letters: str) 
 
 def _hold_posture(run: _Run, hand: HandKinematics, points: list[tuple[BodyRef, Array]],
                   q_ref: Array, moving: Callable[[], Array] | None = None,
-                  rate: float | None = None) -> Callable[[Array], Array] | None:
-    """The self-motion posture torque while the grasp holds (the start ramp, regrasp steps, the
-    final hold): the contact ``points`` held where they are, the hand pulled along its
-    self-motion towards the planned configuration ``q_ref`` ``(M,)``, or ``moving()`` ``(M,)`` (the
-    planned configuration of the moment: a link release); ``None`` when ``options.posture_rate`` is 0."""
-    if not run.options.posture_rate > 0:
+                  rate: float | None = None, servo: bool = True) -> Callable[[Array], Array] | None:
+    """The posture torque while the grasp holds (the start ramp, regrasp steps, the final hold):
+    the hand pulled along its self-motion (joint motions that move none of the contact ``points``)
+    towards the planned configuration ``q_ref`` ``(M,)``, or ``moving()`` ``(M,)`` (the planned
+    configuration of the moment: a link release), gains ``posture_rate`` (or ``rate``) times
+    ``b_posture``; and, with ``options.hold_rate > 0``, the joint motions that do move the contact
+    points held at the configuration the hand has now (not the planned one: a hold does not undo
+    what the steps before it did), gains ``hold_rate`` times ``b_posture``: the joint servo of a
+    real hand holding its posture, which no contact force of a stationary grasp needs
+    (:class:`PlanSimulationOptions`; its largest torque is the step's ``hold_servo``); not with
+    ``servo=False`` (the start ramp). ``None`` when both rates are 0."""
+    opts = run.options
+    hold_rate = opts.hold_rate if servo else 0.0
+    if not (opts.posture_rate > 0 or hold_rate > 0):
         return None
-    gains = (run.options.posture_rate if rate is None else rate) * run.b_q
+    gains = run.gains(opts.posture_rate if rate is None else rate)  # (M,)
+    stiff = run.gains(hold_rate)  # (M,)
     q_fixed = np.array(q_ref, dtype=float)
+    q_now = run.q()  # (M,) the configuration the hold keeps its contacts at
     free: list[slice] = []  # fingers without a contact: their whole configuration is self-motion
-    redundant: list[tuple[slice, list[tuple[BodyRef, Array]]]] = []  # fingers with self-motion left
+    touching: list[tuple[slice, list[tuple[BodyRef, Array]]]] = []  # fingers with contacts
     for f in range(len(hand.fingers)):
         sl = hand.finger_slice(f)
         mine = [pt for pt in points if pt[0].finger == f]
@@ -796,25 +919,34 @@ def _hold_posture(run: _Run, hand: HandKinematics, points: list[tuple[BodyRef, A
             free.append(sl)
             continue
         probe = self_motion_torque(hand, mine, q_fixed, q_fixed + 1.0, np.ones(hand.M))[sl]  # P P 1 on the finger
-        if float(np.max(np.abs(probe))) > 1e-9:  # (every joint of a planar two-link finger moves its contact)
-            redundant.append((sl, mine))
-    if not free and not redundant:
+        # (every joint of a planar two-link finger moves its contact: no self-motion to hold)
+        if float(np.max(np.abs(probe))) > 1e-9 or hold_rate > 0:
+            touching.append((sl, mine))
+    if not free and not touching:
         return None
 
-    projectors: list[Array] = []  # (M, M) per redundant finger, renewed every HOLD_PROJECTOR_EVERY calls
+    projectors: list[Array] = []  # (M, M) per touching finger, renewed every HOLD_PROJECTOR_EVERY calls
     calls = [0]
 
     def torque(q: Array) -> Array:
         out = np.zeros(hand.M)
         q_ref = q_fixed if moving is None else moving()
-        for sl in free:
-            out[sl] = gains[sl] * (q_ref[sl] - q[sl])
+        if opts.posture_rate > 0:
+            for sl in free:
+                out[sl] = gains[sl] * (q_ref[sl] - q[sl])
         if calls[0] % HOLD_PROJECTOR_EVERY == 0:
-            projectors[:] = [self_motion_projector(hand, mine, q) for _, mine in redundant]
+            projectors[:] = [self_motion_projector(hand, mine, q) for _, mine in touching]
         calls[0] += 1
-        for (sl, _), P in zip(redundant, projectors, strict=True):
-            out[sl] = (P @ (gains * (P @ (q_ref - q))))[sl]
-        return out
+        servo = np.zeros(hand.M)
+        for (sl, _), P in zip(touching, projectors, strict=True):
+            if opts.posture_rate > 0:
+                out[sl] += (P @ (gains * (P @ (q_ref - q))))[sl]
+            if hold_rate > 0:
+                Q = np.eye(hand.M) - P  # the joint motions that move the finger's contact points
+                servo[sl] = (Q @ (stiff * (Q @ (q_now - q))))[sl]
+        top = float(np.max(np.abs(servo), initial=0.0))
+        run.hold_servo, run.hold_servo_max = max(run.hold_servo, top), max(run.hold_servo_max, top)
+        return out + servo
 
     return torque
 
@@ -830,8 +962,14 @@ def _posture(run: _Run, hand: HandKinematics, step: PlanStep,
     st = step.transition
     points = [(ref_, c.point_body) for c, letter in zip(step.before.contacts, st.combination, strict=True)
               if letter != "D" and (ref_ := hand.resolve_body(c.body)) is not None and ref_.finger is not None]
-    gains = rate * run.b_q
-    return lambda q: self_motion_torque(hand, points, q, ref(), gains)
+    gains = run.gains(rate)
+    b_self = run.b_posture - run.b_q  # (M,) the damping the self-motion keeps (sim.mjcf.damping)
+
+    def torque(q: Array) -> Array:
+        P = self_motion_projector(hand, points, q)  # (M, M)
+        return np.asarray(P @ (gains * (P @ (ref() - q))) - P @ (b_self * (P @ run.data.qvel[run.dadr])))
+
+    return torque
 
 
 def _object_motion(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, step: PlanStep,
@@ -843,6 +981,8 @@ def _object_motion(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, st
     busy = _fingers_touching(hand, st.contacts_before)
     free = _mask(hand, set(range(len(hand.fingers))) - busy)
     dist = float(np.linalg.norm(st.object_path[-1] - st.object_path[0]))
+    phi = joint_speed_ratio(st.q_path, st.object_path)
+    run.joint_damping(joint_speed_factor(run.s, phi))  # the analysis' fingers are massless: sim.mjcf.damping
     frac_obj = arc_fractions(st.object_path)
     progress = {"u": 0.0, "prev": 0.0, "v": 0.0, "reached": 0.0}
     run.posture = _posture(run, hand, step, lambda: interp_rows(st.q_path, frac_obj, progress["u"]))
@@ -875,6 +1015,7 @@ def _object_motion(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, st
         hold = st.tau_stationary if st.tau_stationary is not None else chosen
         src = "its own tau_st (final grasp not rebuilt)"
     run.ramp_to(hold, st.object_path, free, q_of(0.0))
+    run.joint_damping(1.0)
     moved = float(np.linalg.norm(run.pose().shortest_displacement_from(pose0)))
     return (f"moved {moved:.4g} of {dist:.4g} planned; held with {src}"
             + ("" if reached else f"; did not reach the distance in {options.motion_time} s"))
@@ -887,5 +1028,6 @@ __all__ = [
     "PlanSimulationOptions",
     "PoseError",
     "StepSimulation",
+    "control_model",
     "simulate_plan",
 ]

@@ -4,12 +4,15 @@
 Each step is replayed from its own planned state (the scene of the state before the step, at rest):
 
 * ``release`` / ``contact`` (33): the object must stay put. The grasp after the step is loaded
-  with its stationary torque ``tau_st`` (18) for ``hold_time``; the object must not move more than
+  with its stationary torque ``tau_st`` (18) for ``hold_time``, its joints held by the continuous
+  replay's hold servo (:class:`sim.plan_replay.PlanSimulationOptions`, ``hold_rate``) in the
+  motions that move the contacts; the object must not move more than
   ``hold_tol`` object sizes nor be dropped. (The finger's transfer path itself is a free-space
   motion that exerts nothing on the object; it is not simulated.)
 * ``object_motion`` (30-32): the chosen torque of T is applied to the state before the step, with
   the step's combination as the expected contact states, until the object has travelled the
-  planned distance (``stop_distance``); its displacement is compared with the planned one.
+  planned distance (``stop_distance``), the fingers' damping lowered for the step's joint speeds
+  (``phi``, :func:`sim.mjcf.damping`); its displacement is compared with the planned one.
 
 The object's total displacement is the sum of the steps' displacements, compared with the plan's.
 Errors are position (scene units) and rotation (radians) apart, each relative to the planned
@@ -34,7 +37,8 @@ from analysis.pose import Pose
 from analysis.scene import Scene
 from planner.plan import Plan
 from planner.state import StateAnalysis, all_f, state_scene
-from sim.plan_replay import PoseError
+from sim.plan_paths import joint_speed_ratio
+from sim.plan_replay import DEFAULT_OPTIONS, PoseError
 from sim.torque_replay import simulate_torques
 
 
@@ -82,9 +86,11 @@ class PlanReplay:
 
 
 def replay_plan(scene: Scene, plan: Plan, hold_time: float = 0.1, hold_tol: float = 0.01,
-                motion_time: float = 2.0, tolerance: float = 0.05) -> PlanReplay:
+                motion_time: float = 2.0, tolerance: float = 0.05,
+                hold_rate: float = DEFAULT_OPTIONS.hold_rate) -> PlanReplay:
     """Replay every step of a found plan in MuJoCo (see the module docstring); an object motion
-    is ``ok`` when its relative position and rotation errors are each within ``tolerance``."""
+    is ``ok`` when its relative position and rotation errors are each within ``tolerance``; holds
+    have the continuous replay's joint servo (``hold_rate``, 1/s; 0: torque control only)."""
     if not plan.found:
         raise ValueError("only a found plan can be replayed")
     hand = HandKinematics.from_scene(scene)
@@ -100,7 +106,8 @@ def replay_plan(scene: Scene, plan: Plan, hold_time: float = 0.1, hold_tol: floa
             assert t.tau is not None
             dist = float(np.linalg.norm(planned))  # |dr|, the stop distance of simulate_torques
             error: PoseError | None = None
-            res = simulate_torques(sc, t.tau, duration=motion_time, combination=t.combination, stop_distance=dist)
+            res = simulate_torques(sc, t.tau, duration=motion_time, combination=t.combination, stop_distance=dist,
+                                   phi=joint_speed_ratio(t.q_path, t.object_path))
             sim = np.asarray(res.dr, dtype=float)
             start = Pose.from_vector(t.object_path[0], scene.dim)
             error = PoseError.of(start, Pose.from_vector(t.object_path[-1], scene.dim), start.displaced(sim), size)
@@ -112,7 +119,7 @@ def replay_plan(scene: Scene, plan: Plan, hold_time: float = 0.1, hold_tol: floa
             sa = StateAnalysis.of(scene, step.after, hand)
             grasp = sa.stationary(all_f(step.after))
             assert grasp is not None
-            res = simulate_torques(sc, grasp.tau, duration=hold_time)
+            res = simulate_torques(sc, grasp.tau, duration=hold_time, hold_rate=hold_rate)
             sim = np.asarray(res.dr, dtype=float)
             moved = float(np.linalg.norm(sim[: scene.dim]))
             ok = (not res.dropped) and moved <= hold_tol * size

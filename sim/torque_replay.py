@@ -61,6 +61,7 @@ from sim.mjcf import (
     build_model,
     damping,
     external_xfrc,
+    finger_dof_addresses,
     finger_qpos_addresses,
     object_pose,
     reset_to_scene,
@@ -186,6 +187,10 @@ def self_motion_projector(hand: HandKinematics, points: list[tuple[BodyRef, Arra
     return np.asarray(np.eye(M) - np.linalg.pinv(J, rcond=1e-10) @ J)
 
 
+#: MuJoCo steps between two evaluations of the self-motion projector in :func:`simulate_torques`
+SELF_MOTION_EVERY = 25
+
+
 def smooth_ramp(t: float, T: float) -> float:
     """Smooth ramp from 0 (``t = 0``) to 1 (``t >= T``): ``3x^2 - 2x^3``."""
     if T <= 0 or t >= T:
@@ -203,6 +208,8 @@ def simulate_torques(
     params: SimulationParams = DEFAULT_PARAMS,
     stop_distance: float | None = None,
     sample_every: int = 1,
+    phi: float | None = None,
+    hold_rate: float = 0.0,
 ) -> SimulationResult:
     """Apply constant joint torques ``tau`` ``(M,)`` (scene finger order; ``tau = J^T f`` for
     contact forces ``f`` the fingers apply on the object) together with the scene's external
@@ -218,8 +225,17 @@ def simulate_torques(
     ``stop_distance``: stop early once ``|dr|`` exceeds it (keeps the motion small, where the
     first-order analysis applies). ``sample_every``: contacts are read every this many steps.
     ``combination``: a string such as ``"FSDDD"``; each contact outcome then carries the expected
-    state and whether it agrees. Raises :class:`SceneError` for a wrong ``tau`` length, a
-    non-positive duration or a bad combination.
+    state and whether it agrees. ``phi``: the joint speed per unit object speed of the motion the
+    torque is for (eq. 31, ``TorqueSet.phi``), which lowers the fingers' damping where the joints
+    turn fast (:func:`sim.mjcf.damping`) in the joint motions that move the contacts (of the
+    combination's F, S, N points; all contacts without one); the self-motion, which no contact
+    force balances, keeps the nominal damping (an added torque ``-(b_q0 - b_q) P P dq/dt``, ``P``
+    the self-motion projector of :func:`self_motion_torque`), so a constant torque's drift along
+    it is as slow as before. ``hold_rate`` (1/s, > 0): a hold, with the joint servo of the continuous
+    replay (:class:`sim.plan_replay.PlanSimulationOptions`, stiffness ``hold_rate b_q``) holding the
+    joint motions that move the contacts where they are once the load has come on (after the ramp,
+    as the continuous replay does not servo its start ramp). Raises :class:`SceneError` for
+    a wrong ``tau`` length, a non-positive duration, a bad combination or ``hold_rate``.
     """
     hand = HandKinematics.from_scene(scene)
     tau = np.asarray(tau, dtype=float).ravel()  # (M,)
@@ -231,7 +247,7 @@ def simulate_torques(
 
     dim, D = scene.dim, scene.D
     s = object_size(scene)
-    model = build_model(scene, params, tau)
+    model = build_model(scene, params, tau, phi)
     data = mujoco.MjData(model)
     reset_to_scene(model, data)
     tracker = ContactTracker(scene, hand, model, params)
@@ -250,11 +266,35 @@ def simulate_torques(
     n_samples = 0
     stopped, dropped, reason = False, False, ""
     unloaded_run = 0  # consecutive samples without any contact pushing on the object
+    dadr = finger_dof_addresses(model, scene)  # (M,)
+    # a lowered finger damping (phi) is lowered for the joint motions that move the contacts only:
+    # the self-motion, whose damping no contact force balances, keeps the nominal one
+    b_nom = damping(scene, tau, params).finger_damping
+    b_self = b_nom - damping(scene, tau, params, phi).finger_damping
+    if not (hold_rate >= 0 and np.isfinite(hold_rate)):
+        raise SceneError(("hold_rate",), f"must be a finite rate >= 0 in 1/s (got {hold_rate!r})")
+    stiff = min(hold_rate * b_nom, 0.5 * b_nom / h)  # the continuous replay's cap (STABLE_GAIN)
+    points = [(ref, hand.to_local(ref, np.asarray(c.point, dtype=float), hand.q0))
+              for i, c in enumerate(scene.contacts)
+              if (comb is None or comb[i] != "D") and (ref := hand.resolve_body(c.body)) is not None
+              and ref.finger is not None] if (b_self > 0 or stiff > 0) else []
+    P = np.zeros((hand.M, hand.M))
+    q_hold: Array | None = None  # (M,) the hold servo's reference, taken once the load is on
     for step in range(1, n_steps + 1):
         lam = smooth_ramp((step - 0.5) * h, params.ramp_time)
         data.ctrl[:] = lam * tau
+        if b_self > 0 or stiff > 0:
+            if step % SELF_MOTION_EVERY == 1:
+                P = self_motion_projector(hand, points, np.array(data.qpos[qadr]))
+            if b_self > 0:
+                data.ctrl[:] -= b_self * (P @ (P @ data.qvel[dadr]))
+            if stiff > 0 and q_hold is not None:  # the hold servo: contact-moving joint motions held
+                Q = np.eye(hand.M) - P
+                data.ctrl[:] += stiff * (Q @ (Q @ (q_hold - data.qpos[qadr])))
         data.xfrc_applied[obj_id] = lam * xfrc
         mujoco.mj_step(model, data)
+        if stiff > 0 and q_hold is None and step * h >= params.ramp_time:
+            q_hold = np.array(data.qpos[qadr])  # the servo holds where the loaded grasp settled
         if step % sample_every and step != n_steps:
             continue
         n_samples += 1
@@ -320,7 +360,7 @@ def simulate_torques(
         combination=comb,
         stopped_early=stopped,
         object_size=s,
-        damping=damping(scene, tau, params),
+        damping=damping(scene, tau, params, phi),
         params=params,
     )
 

@@ -22,6 +22,7 @@ from analysis.scene import Scene
 
 ROOT = Path(__file__).resolve().parents[2]
 PLANAR = ROOT / "examples" / "planar_disk_envelope.json"
+EXAMPLES = ROOT / "examples"
 
 
 def _rod(name: str, a: Any, b: Any, radius: float) -> dict[str, Any]:
@@ -432,3 +433,38 @@ def test_scene_geometry_mesh_queries_do_not_keep_an_earlier_penetration(tmp_path
         d = geo.distance([geo.segment_body(np.array([0.0, 0.0, z]), np.array([0.0, 0.0, z + 0.1]))], obj)
         # apart: the gap above the top face; through it: the translation that pushes it out (up)
         assert d == pytest.approx(z - half[2], abs=1e-6)
+
+
+def test_links_lying_flat_with_one_listed_point_are_reported() -> None:
+    """Baxter's point-contact hug lists one point per elbow and forearm capsule and two of the box's
+    four bottom corners, while each capsule lies flat on a side (a line: its two end points) and
+    the bottom face on the table (a patch): each such body is reported, with the line's length
+    (independently: the capsule's segment clipped to the box side, at most its length); the line
+    contact scene lists them all and nothing is reported; nor for the fingertip wrap."""
+    from analysis.detect import unlisted_points
+    from analysis.kinematics import HandKinematics
+
+    points = load_scene(EXAMPLES / "baxter_hug_box.json")
+    got = {u.body: u for u in unlisted_points(points)}
+    arms = {"left/left_lower_elbow", "left/left_upper_forearm", "right/right_lower_elbow", "right/right_upper_forearm"}
+    assert set(got) == arms | {"table"}
+    hand = HandKinematics.from_scene(points)
+    for b in arms:
+        assert (got[b].listed, got[b].found) == (1, 2)
+        ref = hand.resolve_body(b)
+        assert ref is not None
+        a, e = hand.body_segment(ref, hand.q0)
+        assert 0.0 < got[b].extent <= float(np.linalg.norm(np.asarray(e) - np.asarray(a))) + 1e-9
+        assert "line" in got[b].describe() and "ctp contacts" in got[b].describe()
+    assert (got["table"].listed, got["table"].found) == (2, 4) and "patch" in got["table"].describe()
+    assert unlisted_points(load_scene(EXAMPLES / "baxter_hug_box_lines.json")) == ()
+    assert unlisted_points(load_scene(EXAMPLES / "sphere_four_finger_wrap.json")) == ()
+
+
+def test_ctp_notes_the_unlisted_line_points() -> None:
+    from typer.testing import CliRunner
+
+    from ctp.cli import app
+
+    r = CliRunner().invoke(app, ["analyze", str(EXAMPLES / "baxter_hug_box.json"), "--combination", "FFFFDD"])
+    assert "note:" in r.output and "left/left_upper_forearm lies on the object along a line" in r.output

@@ -129,3 +129,16 @@ def test_posture_rate_default_is_the_replays_and_bad_rates_exit_2(tmp_path) -> N
     for bad in ("-1", "nan", "inf"):
         r = CliRunner().invoke(app, ["simulate", str(plan_file), "--posture-rate", bad])
         assert r.exit_code == 2 and "posture-rate" in r.output and "Traceback" not in r.output, (bad, r.output)
+
+
+def test_hold_rate_default_is_the_replays_and_bad_rates_exit_2(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    from ctp.cli import HOLD_RATE
+    from sim.plan_replay import PlanSimulationOptions
+
+    assert PlanSimulationOptions().hold_rate == HOLD_RATE
+    plan_file = tmp_path / "plan.json"
+    plan_file.write_text(json.dumps({"steps": [], "scene": json.loads(
+        (EXAMPLES / "planar_disk_envelope.json").read_text())}))
+    for bad in ("-1", "nan", "inf"):
+        r = CliRunner().invoke(app, ["simulate", str(plan_file), "--hold-rate", bad])
+        assert r.exit_code == 2 and "hold-rate" in r.output and "Traceback" not in r.output, (bad, r.output)

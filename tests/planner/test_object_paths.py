@@ -171,9 +171,12 @@ def test_direction_cosines() -> None:
 
 def test_two_arms_lift_the_box_3_cm_off_the_table() -> None:
     """Issue 11: Baxter's arms hugging the box (elbow and forearm links) lift it 3 cm (position
-    within 5 mm, rotation within 0.3 rad): one object motion FFFFDD along the analysed direction
-    (a lift with a small tilt about y, the only way these contacts let the box go straight up),
-    verified step by step, the table contacts separated, the box never into the table."""
+    within 5 mm, rotation within 0.3 rad): object motions along the analysed directions (a lift
+    with a small tilt about y, the only way these contacts let the box go straight up), the first
+    FFFFDD separating the table contacts, the others FFFF, each ending where its one torque still
+    keeps half of its friction margin (planner.motion_length: under one torque the 8.3 cm of the
+    former single motion ended with the forces 32 N outside the friction set), verified step by
+    step, the box never into the table."""
     from planner import Goal, plan
     from planner.goals import pose_errors
 
@@ -181,23 +184,24 @@ def test_two_arms_lift_the_box_3_cm_off_the_table() -> None:
     x, y, z = (float(v) for v in scene.object.pose.position)
     lift = [x, y, z + 0.03, 0.0, 0.0, 0.0]
     goal = Goal(type="pose", pose=lift, position_tolerance=0.005, rotation_tolerance=0.3)
-    p = plan(scene, goal, max_expansions=5)
+    p = plan(scene, goal, max_expansions=10)
     assert p.found and p.outcome == "reached", p.reason
-    assert [s.transition.combination for s in p.steps] == ["FFFFDD"]
+    combos = [s.transition.combination for s in p.steps]
+    assert combos[0] == "FFFFDD" and set(combos[1:]) <= {"FFFF"}, combos
     pos, rot = pose_errors(goal, p.steps[-1].after)
     assert pos <= 0.005 and rot <= 0.3
     assert p.displacement[2] >= 0.025
     assert verify_plan(scene, p) == []
-    step = p.steps[0]
     hand = HandKinematics.from_scene(scene)
     model = CollisionModel.of(scene, hand)
-    for v in step.transition.object_path:
-        pose = Pose.from_vector(v, 3)
-        assert model.object_clearance(pose.position, pose.rotation) >= -1e-6
-    S = np.array([pose_displacement(step.before, v) for v in step.transition.object_path])
-    ts = step.transition.torque_set
-    assert ts is not None
-    assert direction_cosines(S, np.asarray(ts["direction"], float)).min() >= 0.99
+    for step in p.steps:
+        for v in step.transition.object_path:
+            pose = Pose.from_vector(v, 3)
+            assert model.object_clearance(pose.position, pose.rotation) >= -1e-6
+        S = np.array([pose_displacement(step.before, v) for v in step.transition.object_path])
+        ts = step.transition.torque_set
+        assert ts is not None
+        assert direction_cosines(S, np.asarray(ts["direction"], float)).min() >= 0.99
 
 
 def test_object_motion_validity_refuses_the_object_in_the_palm(planar_scene: Scene, motion_step) -> None:  # type: ignore[no-untyped-def]

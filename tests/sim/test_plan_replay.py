@@ -118,7 +118,11 @@ def test_ctp_simulate_replays_a_plan_file(tmp_path, planar_continuous) -> None: 
     r = CliRunner().invoke(app, ["simulate", str(plan_file), "--json", str(rep_file)])
     assert r.exit_code == 0, r.output
     assert "final pose simulated" in r.output and "dropped: no" in r.output
+    # the replay states its model of the hand: holds with the servo, object motions without
+    assert "control: holds: the planned holding torque (18) and a joint servo" in r.output
+    assert "object motions: the plan's torque (32)" in r.output and "no servo" in r.output
     rep = json.loads(rep_file.read_text())
+    assert rep["control"].startswith("holds:") and 0.0 < rep["hold_servo_share"] < 0.05
     assert not rep["dropped"] and rep["ok"] and rep["relative_error"] <= 0.05
     assert len(rep["steps"]) == len(planar_continuous.steps)
     # the file (rounded to 1e-10) replays like the in-memory plan
