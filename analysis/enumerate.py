@@ -21,20 +21,18 @@ import multiprocessing as mp
 import os
 import re
 from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from analysis._types import Array
-from analysis.combination import CombinationParts, CombinationSummary, summarize
+from analysis.combination import CombinationParts, CombinationSummary, no_grasp_reason, summarize_with_member
 from analysis.contacts import GraspSystem
+from analysis.dafc import allowable_cone
+from analysis.dafc_family import FamilyKinematics, MemberCertificate, slip_depends_on_redundancy
 from analysis.exceptions import CombinationError
-from analysis.scales import REUSE_TOL
-from analysis.stationary import DEGENERATE_TOL, certifies, min_total_normal, stationary_violation
-
-_CLASS = {"F": 2, "S": 1, "N": 1, "D": 0}
-
+from analysis.motion import motion_dims
+from analysis.stationary_table import CLASS, stationary_verdicts
 
 _OPS: dict[str, Callable[[int, int], bool]] = {
     ">=": lambda a, b: a >= b, "<=": lambda a, b: a <= b, "==": lambda a, b: a == b,
@@ -71,117 +69,45 @@ class EnumerationStats:
     stationary_lps: int = 0
     dafc_lps: int = 0  # LPs of the DAFC oracles (membership, redundancy, relaxation, realisability)
     stopped_at_limit: bool = False  # the enumeration stopped after ``limit`` feasible combinations
+    dafc_searched: int = 0  # combinations whose DAFC was decided by their own search
+    dafc_shared: int = 0  # combinations decided by a re-checked member of a stronger one
 
-
-class _StationaryCache:
-    """Monotone memory of stationary-grasp feasibility over force classes (F=2, S/N=1, D=0).
-
-    An infeasible combination makes every combination it dominates infeasible (their force sets
-    are subsets). A feasible one leaves its certificate: the contact forces ``(L, d)`` in newtons
-    and the weakest class each contact needs (zero force -> 0, normal only -> 1, else 2, with the
-    absolute thresholds of :mod:`analysis.scales`). A cached certificate answers for another
-    combination only after it is re-checked against that combination's eq. (18) in physical units
-    (:func:`analysis.stationary.certifies`).
-    """
-
-    def __init__(self, L: int) -> None:
-        self.infeasible = np.zeros((0, L), dtype=np.int8)  # (k, L)
-        self.witnesses = np.zeros((0, L), dtype=np.int8)  # (k, L)
-        self.forces: list[Array] = []  # per witness, (L, d) contact forces [N]
-        self.violations = np.zeros(0)  # per infeasible entry, its least friction violation (inf: none)
-
-    def candidates(self, cls: tuple[int, ...]) -> list[Array]:
-        """Cached certificates whose classes fit the combination with classes ``cls``."""
-        if not self.witnesses.shape[0]:
-            return []
-        c = np.asarray(cls, dtype=np.int8)
-        return [self.forces[k] for k in np.flatnonzero(np.all(c >= self.witnesses, axis=1))[:4]]
-
-    def infeasible_for(self, cls: tuple[int, ...]) -> tuple[bool, float | None]:
-        """Is (18) infeasible for ``cls`` by a cached stronger combination, and the largest friction
-        violation among those (a lower bound of its own: a weaker force set needs at least as much)."""
-        if not self.infeasible.shape[0]:
-            return False, None
-        c = np.asarray(cls, dtype=np.int8)
-        hit = np.all(c <= self.infeasible, axis=1)
-        if not np.any(hit):
-            return False, None
-        return True, float(np.max(self.violations[hit]))
-
-    def add_infeasible(self, cls: tuple[int, ...], violation: float | None) -> None:
-        self.infeasible = np.vstack([self.infeasible, np.asarray(cls, dtype=np.int8)])
-        self.violations = np.r_[self.violations, np.inf if violation is None else violation]
-
-    def add_witness(self, parts: CombinationParts, f_c: Array) -> None:
-        forces = _contact_forces(parts, f_c)
-        self.witnesses = np.vstack([self.witnesses, np.asarray(_witness_classes(parts, forces), dtype=np.int8)])
-        self.forces.append(forces)
-
-
-def _contact_forces(parts: CombinationParts, f_c: Array) -> Array:
-    """The force on the object at every contact, ``(L, d)`` world frame [N] (zero at D-points)."""
-    sy, sel = parts.system, parts.sel
-    out = np.zeros((sy.L, sy.d))
-    for i, s in enumerate(sel.combination):
-        f = f_c[sel.c_slices[i]]
-        if s == "F":
-            out[i] = f
-        elif s in "SN":
-            out[i] = float(f[0]) * sy.normals[i]
-    return out
-
-
-def _selected_forces(parts: CombinationParts, forces: Array) -> Array:
-    """``f_c`` of the combination of ``parts`` from contact forces ``(L, d)``."""
-    sy, sel = parts.system, parts.sel
-    out = np.zeros(sel.L_c)
-    for i, s in enumerate(sel.combination):
-        sl = sel.c_slices[i]
-        if s == "F":
-            out[sl] = forces[i]
-        elif s in "SN":
-            out[sl] = forces[i] @ sy.normals[i]
-    return out
-
-
-def _witness_classes(parts: CombinationParts, forces: Array) -> tuple[int, ...]:
-    """Weakest force class of each contact that the contact forces ``(L, d)`` still satisfy:
-    0 when the force is at most ``ZERO_FORCE F0``, 1 when its tangential part is, else 2."""
-    sy = parts.system
-    zero = sy.scales.zero_force
-    out = []
-    for i in range(sy.L):
-        f = forces[i]
-        if float(np.linalg.norm(f)) <= zero:
-            out.append(0)
-        elif np.linalg.norm(f - (f @ sy.normals[i]) * sy.normals[i]) > zero:
-            out.append(2)
-        else:
-            out.append(1)
-    return tuple(out)
+    @property
+    def lps(self) -> int:
+        return self.stationary_lps + self.dafc_lps
 
 
 def _order(combos: Iterable[str]) -> list[str]:
-    """Strongest combinations first, so infeasibility propagates downwards."""
-    return sorted(combos, key=lambda c: -sum(_CLASS[s] for s in c))
+    """Strongest combinations first (stable), so infeasibility and members propagate downwards."""
+    return sorted(combos, key=lambda c: -sum(CLASS[s] for s in c))
 
 
 #: Enumerations larger than this are split over worker processes (when ``workers`` > 1).
 PARALLEL_THRESHOLD = 2000
+#: Own DAFC searches run ahead of the committed order per worker (speculation window).
+AHEAD = 3
 
 _WORKER: dict[str, object] = {}
 
 
-def _worker_init(system: GraspSystem, admissible: Callable[[str], bool] | None) -> None:
+def _worker_init(system: GraspSystem) -> None:
     _WORKER["system"] = system
-    _WORKER["admissible"] = admissible
 
 
-def _worker_run(chunk: list[str]) -> tuple[list[CombinationSummary], EnumerationStats]:
+def _own_search(system: GraspSystem, combination: str) -> tuple[CombinationSummary, MemberCertificate | None, int]:
+    """The DAFC search of one combination whose stationary grasp exists: its summary, the
+    certificate of its member (for the family) and the LPs it solved."""
+    parts = CombinationParts.build(system, combination)
+    oracle = parts.oracle()
+    summary, member = summarize_with_member(parts, stationary_known=True, oracle=oracle, realisable=False)
+    cert = MemberCertificate.of(parts, member) if member is not None else None
+    return summary, cert, oracle.lp_count
+
+
+def _worker_search(combination: str) -> tuple[CombinationSummary, MemberCertificate | None, int]:
     system = _WORKER["system"]
     assert isinstance(system, GraspSystem)
-    adm = _WORKER["admissible"]
-    return _enumerate_serial(system, chunk, adm if callable(adm) else None, None)
+    return _own_search(system, combination)
 
 
 def enumerate_combinations(
@@ -196,99 +122,165 @@ def enumerate_combinations(
     """Summaries of every combination (scene order of letters), strongest-first evaluation.
 
     ``admissible`` (e.g. from the contact modes) may veto combinations no motion realises.
-    Results are returned in the canonical product order (F/S/D or N/D per contact).
-    ``workers``: processes for large enumerations (default: all cores above
-    ``PARALLEL_THRESHOLD`` combinations, else 1); each worker keeps its own pruning memory.
+    Results are returned in the canonical product order (F/S/D or N/D per contact), or in the
+    order of ``combinations``.
+
+    The combinations are decided in stages, each over all of them at once: the motion-space
+    dimensions (batched SVDs, :func:`analysis.motion.motion_dims`); the stationary grasps, by
+    monotonicity from few LPs (:mod:`analysis.stationary_table`); then DAFC, strongest first,
+    each combination by its own search (:func:`analysis.dafc.dafc_nonempty`) unless the
+    re-checked member of a stronger combination decides it (:mod:`analysis.dafc_family`).
+    ``workers`` processes (default: all cores above ``PARALLEL_THRESHOLD`` combinations, else 1)
+    run the own searches ahead of the strongest-first order; the results are committed in that
+    order, so the table does not depend on the number of workers.
     ``where`` (:func:`parse_where`) keeps only the combinations it accepts; ``limit`` stops after
-    that many feasible combinations (one process, strongest first) and returns the rows decided so
-    far, with ``stats.stopped_at_limit``.
+    that many feasible combinations (strongest first) and returns the rows decided so far, with
+    ``stats.stopped_at_limit``. ``progress(done, total)`` is called as combinations are decided.
     """
     letters = ["FSD" if m > 0 else "ND" for m in system.mu]
     canonical = ["".join(p) for p in itertools.product(*letters)] if combinations is None else list(combinations)
     if where is not None:
         canonical = [c for c in canonical if where(c)]
-    if limit is not None:
-        if limit < 1:
-            raise CombinationError(("limit",), f"{limit} must be at least 1")
-        workers = 1
+    if limit is not None and limit < 1:
+        raise CombinationError(("limit",), f"{limit} must be at least 1")
     if workers is None:
         workers = (os.cpu_count() or 1) if len(canonical) > PARALLEL_THRESHOLD else 1
-    if workers <= 1:
-        return _enumerate_serial(system, canonical, admissible, progress, limit)
-    ordered = _order(canonical)
-    n_chunks = max(workers * 2, 1)
-    chunks = [ordered[k::n_chunks] for k in range(n_chunks)]  # interleaved: similar strength mix
-    stats = EnumerationStats(combinations=len(canonical))
-    results: dict[str, CombinationSummary] = {}
-    done = 0
-    ctx = mp.get_context("fork")
-    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
-                             initargs=(system, admissible)) as pool:
-        for summaries, st in pool.map(_worker_run, chunks):
-            for sm in summaries:
-                results[sm.combination] = sm
-            for f in ("pruned_motion", "pruned_stationary", "pruned_modes", "stationary_lps", "dafc_lps"):
-                setattr(stats, f, getattr(stats, f) + getattr(st, f))
-            done += len(summaries)
-            if progress is not None:
-                progress(done, len(canonical))
-    return [results[c] for c in canonical], stats
-
-
-def _enumerate_serial(
-    system: GraspSystem,
-    canonical: list[str],
-    admissible: Callable[[str], bool] | None,
-    progress: Callable[[int, int], None] | None,
-    limit: int | None = None,
-) -> tuple[list[CombinationSummary], EnumerationStats]:
-    stats = EnumerationStats(combinations=len(canonical))
-    feasible = 0
-    cache = _StationaryCache(system.L)
-    results: dict[str, CombinationSummary] = {}
-    ordered = _order(canonical)
-    for k, c in enumerate(ordered):
-        if progress is not None:
-            progress(k, len(ordered))
-        parts = CombinationParts.build(system, c)
-        ms, st = parts.ms, parts.st
-        if ms.a_bar == 0:
-            stats.pruned_motion += 1
-            results[c] = CombinationSummary(c, False, "object cannot move (a~ = 0)", ms.a, 0, 0, st.p, True, None)
-            continue
-        if admissible is not None and not admissible(c):
-            stats.pruned_modes += 1
-            results[c] = CombinationSummary(c, False, "no object motion realises these contact states",
-                                            ms.a, ms.a_bar, 0, st.p, True, None)
-            continue
-        cls = tuple(_CLASS[s] for s in c)
-        pruned, bound = cache.infeasible_for(cls)
-        known: bool | None = False if pruned else None
-        violation: float | None = None
-        if pruned and bound is not None and bound > DEGENERATE_TOL:
-            violation = bound  # not degenerate: its own violation is at least that
-        if known is None and any(certifies(system, st, parts.fs, _selected_forces(parts, f), REUSE_TOL)
-                                 for f in cache.candidates(cls)):
-            known = True
-        if known is None:
-            stats.stationary_lps += 1
-            found = min_total_normal(system, st, parts.fs)
-            if found is None:
-                violation = stationary_violation(system, st, parts.fs)
-                cache.add_infeasible(cls, violation)
-            else:
-                cache.add_witness(parts, found[1])
-            known = found is not None
-        else:
-            stats.pruned_stationary += 1
-        oracle = parts.oracle()
-        summary = summarize(parts, stationary_known=known, violation=violation, oracle=oracle)
-        stats.dafc_lps += oracle.lp_count
-        results[c] = summary
-        feasible += summary.feasible
-        if limit is not None and feasible >= limit:
-            stats.stopped_at_limit = k + 1 < len(ordered)
-            break
-    if progress is not None:
-        progress(len(ordered), len(ordered))
+    ordered = _order(dict.fromkeys(canonical))
+    results, stats = _Enumeration(system, ordered, admissible, progress).run(workers, limit)
+    stats.combinations = len(canonical)
     return [results[c] for c in canonical if c in results], stats
+
+
+class _Enumeration:
+    """The staged enumeration of :func:`enumerate_combinations` over ``ordered`` (strongest first)."""
+
+    def __init__(self, system: GraspSystem, ordered: list[str], admissible: Callable[[str], bool] | None,
+                 progress: Callable[[int, int], None] | None) -> None:
+        self.system, self.ordered, self.admissible, self.progress = system, ordered, admissible, progress
+        self.results: dict[str, CombinationSummary] = {}
+        self.stats = EnumerationStats()
+        self.kin = FamilyKinematics(system)
+
+    def _tick(self) -> None:
+        if self.progress is not None:
+            self.progress(len(self.results), len(self.ordered))
+
+    def run(self, workers: int, limit: int | None) -> tuple[dict[str, CombinationSummary], EnumerationStats]:
+        sy, st, res = self.system, self.stats, self.results
+        D = sy.D
+        a, a_bar = motion_dims(sy, self.ordered) if self.ordered else (np.zeros(0, int), np.zeros(0, int))
+        self.dims = {c: (int(a[k]), int(a_bar[k])) for k, c in enumerate(self.ordered)}
+        moving: list[str] = []
+        for c in self.ordered:
+            ak, abk = self.dims[c]
+            if abk == 0:
+                st.pruned_motion += 1
+                res[c] = CombinationSummary(c, False, "object cannot move (a~ = 0)", ak, 0, 0, D, True, None)
+            elif self.admissible is not None and not self.admissible(c):
+                st.pruned_modes += 1
+                res[c] = CombinationSummary(c, False, "no object motion realises these contact states",
+                                            ak, abk, 0, D - abk, True, None)
+            else:
+                moving.append(c)
+        self._tick()
+        verdicts = stationary_verdicts(sy, moving)
+        st.stationary_lps += verdicts.lps
+        self.dafc_rows: list[str] = []
+        for k, c in enumerate(moving):
+            ak, abk = self.dims[c]
+            if verdicts.feasible[k]:
+                self.dafc_rows.append(c)
+                continue
+            v = float(verdicts.violation[k])
+            res[c] = CombinationSummary(c, False, no_grasp_reason(None if np.isnan(v) else v), ak, abk, 0,
+                                        D - abk, True, None)
+        st.pruned_stationary = int(np.sum(~verdicts.own))  # (18) decided without an LP of its own
+        self._tick()
+        self._dafc(workers)
+        if limit is not None:
+            self._cut(limit)
+        return res, st
+
+    # -- DAFC: own searches and families ------------------------------------------------------------
+
+    def _commit(self, c: str, summary: CombinationSummary, cert: MemberCertificate | None, lps: int) -> None:
+        self.results[c] = summary
+        self.stats.dafc_lps += lps
+        self.stats.dafc_searched += 1
+        if cert is not None:
+            self._share(cert)
+
+    def _share(self, cert: MemberCertificate) -> None:
+        """Decide the undecided combinations of the certificate's family that it passes for."""
+        sy = self.system
+        family = [c for c in cert.family(sy) if c in self.pending and c not in self.results]
+        if not family:
+            return
+        for c, good in zip(family, cert.check(self.kin, family), strict=True):
+            if not good:
+                continue
+            ak, abk = self.dims[c]
+            dim = self._cone_dim(c, cert)
+            if dim is None:
+                continue
+            exact = "S" not in c or (abk == 1 and not slip_depends_on_redundancy(sy, c))
+            self.results[c] = CombinationSummary(c, True, "feasible", ak, abk, dim, sy.D - abk, exact,
+                                                 cert.direction, cert.motion)
+            self.stats.dafc_shared += 1
+
+    def _cone_dim(self, c: str, cert: MemberCertificate) -> int | None:
+        """The dimension of the allowable cone (the table's DAFC dimension for a member): ``a_bar``
+        when a motion that separates every D-point strictly proves the cone full-dimensional
+        (:meth:`FamilyKinematics.separating`), else from its generators
+        (cdd), as :func:`analysis.dafc.dafc_nonempty` computes it; None when it has none."""
+        if self.kin.separating(c, cert.motion) is not None:
+            return self.dims[c][1]
+        parts = CombinationParts.build(self.system, c)
+        dirs = allowable_cone(parts.ms).all_directions()
+        if dirs.shape[0] == 0:
+            return None
+        return int(np.linalg.matrix_rank(dirs, tol=1e-9))
+
+    def _dafc(self, workers: int) -> None:
+        self.pending = set(self.dafc_rows)
+        if workers <= 1 or len(self.dafc_rows) < 2:
+            for c in self.dafc_rows:
+                if c not in self.results:
+                    self._commit(c, *_own_search(self.system, c))
+                    self._tick()
+            return
+        # own searches run ahead in worker processes; results are committed strictly in order
+        ctx = mp.get_context("fork")
+        with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
+                                 initargs=(self.system,)) as pool:
+            futures: dict[str, Future[tuple[CombinationSummary, MemberCertificate | None, int]]] = {}
+            ahead = 0
+            for k, c in enumerate(self.dafc_rows):
+                if c in self.results:
+                    futures.pop(c, None)
+                    continue
+                # keep the window full: the next undecided combinations after c
+                for nxt in self.dafc_rows[max(k, ahead):]:
+                    ahead += 1
+                    if len(futures) >= AHEAD * workers:
+                        ahead -= 1
+                        break
+                    if nxt not in self.results and nxt not in futures:
+                        futures[nxt] = pool.submit(_worker_search, nxt)
+                fut = futures.pop(c, None)
+                out = fut.result() if fut is not None else _own_search(self.system, c)
+                self._commit(c, *out)
+                self._tick()
+                for done in [n for n in futures if n in self.results]:
+                    futures.pop(done).cancel()
+
+    def _cut(self, limit: int) -> None:
+        """Keep the rows up to the ``limit``-th feasible one (strongest-first order)."""
+        feasible = 0
+        for k, c in enumerate(self.ordered):
+            feasible += self.results[c].feasible
+            if feasible >= limit:
+                self.stats.stopped_at_limit = k + 1 < len(self.ordered)
+                for rest in self.ordered[k + 1:]:
+                    self.results.pop(rest, None)
+                return

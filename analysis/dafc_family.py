@@ -1,0 +1,330 @@
+"""DAFC (22) members shared along a family of combinations.
+
+A member of DAFC for one combination is a motion ``[dq; dr]`` (F-points stick, S-points slide,
+D-points do not penetrate) and contact forces (friction set, passive equalities ``Xi^T w = 0``,
+grip bound) whose net wrench ``w = G_eff f_c + w_ex`` does positive work along ``dr``. Let a
+contact that carries no force in it (an F-, S- or N-point with force at most ``ZERO_FORCE F0``) go:
+the combination with that contact D
+
+* keeps the motion: the contact was kept (``n^T A_j v = 0``), so it does not penetrate, and the
+  other contacts keep their states and slips;
+* keeps the forces: the contact carried none, so ``f_c`` and ``w`` are those of the source;
+* keeps ``W_2``: its motion space ``null(A_c)`` has fewer rows, so its object motions
+  ``range(Lambda~_r)`` contain the source's, and the net wrench, which lies in the source's, lies
+  in them (``Xi^T w = 0`` with ``Xi`` orthogonal to them).
+
+So the member of one combination is a member of every combination that turns any subset of its
+force-free contacts to D (:meth:`MemberCertificate.family`). It is used for such a combination
+only after :meth:`MemberCertificate.check` re-checks it in physical units for that combination:
+the motion (stick, slide, no penetration, with absolute tolerances), the friction rows, the
+grip bound, the passive part of ``w`` off the object motions and, constructively, that the object
+part of ``w`` is an object motion of the combination (a motion of its null space, residual at
+rounding level), and the work above the threshold.
+
+The dimension of DAFC for the combination is that of its allowable cone ``A_r`` (eq. 20), as the
+per-combination search reports it for a member in the interior of ``A_r`` (for non-degenerate
+data the member has a neighbourhood of members in ``A_r``); :meth:`FamilyKinematics.separating`
+proves ``A_r`` full-dimensional (then of dimension ``a_bar``) with a motion that separates every
+D-point strictly.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from analysis._types import Array
+from analysis.combination import CombinationParts
+from analysis.contacts import GraspSystem, selection
+from analysis.dafc import ALLOW_TOL, SLIP_TOL, DirectionTest
+from analysis.friction import kinetic_friction
+from analysis.linalg import RANK_RTOL, null_space
+from analysis.motion import NULL_ROW_TOL
+from analysis.scales import FORCE_TOL, snap
+
+#: Kinematic equalities of a reused motion (F sticks, S/N keeps contact), relative to its size:
+#: far above rounding (~1e-15), far below any motion.
+MOTION_TOL = 1e-9
+#: A D-point separates strictly (:meth:`FamilyKinematics.separating`) when ``n^T A_j v`` is below
+#: minus this fraction of the motion's size.
+STRICT_TOL = 1e-9
+#: A D-point's normal velocity row on an orthonormal basis of the motion space below this is
+#: clearly zero (rounding); between it and ``1e3 NULL_ROW_TOL`` it is too close to the threshold of
+#: :attr:`analysis.motion.MotionSpace.B` to be decided here.
+ZERO_ROW = 1e-12
+
+
+@dataclass(frozen=True)
+class MemberCertificate:
+    """A DAFC member of the combination ``source`` in scene coordinates, for re-use."""
+
+    source: str
+    direction: Array  # (D,) unit object direction dr
+    motion: Array  # (M + D,) [dq; dr] of that unit object motion
+    f_c: Array  # (L,) per contact: its normal force [N] (S/N), 0 (D), nan (F: see forces)
+    forces: Array  # (L, d) per F-point its force [N]; zero rows elsewhere
+    slips: Array  # (L, d) per S-point its unit slip (object relative to the finger); zero elsewhere
+    Lambda_r_t: Array  # (D, a_bar) object motions of the source
+    Lambda_q_t: Array  # (M, a_bar) their least-norm finger motions
+
+    @classmethod
+    def of(cls, parts: CombinationParts, t: DirectionTest) -> MemberCertificate | None:
+        """The certificate of the member ``t`` of ``parts``' combination (None without forces)."""
+        if not t.member or t.forces is None or t.zeta_c is None:
+            return None
+        sy, sel, ms = parts.system, parts.sel, parts.ms
+        L, d = sy.L, sy.d
+        f_c = np.zeros(L)
+        forces = np.zeros((L, d))
+        slips = np.zeros((L, d))
+        if sel.s_index:
+            kf = kinetic_friction(sy, sel, (ms.P_s @ t.zeta_c).reshape(len(sel.s_index), d))
+            for k, i in enumerate(sel.s_index):
+                slips[i] = kf.slips[k]
+        for i, s in enumerate(sel.combination):
+            f = t.forces[sel.c_slices[i]]
+            if s == "F":
+                forces[i] = f
+                f_c[i] = np.nan
+            elif s in "SN":
+                f_c[i] = float(f[0])
+        return cls(sel.combination, t.direction, ms.Phi_full @ t.zeta_c, f_c, forces, slips,
+                   ms.Lambda_r_t, ms.Lambda_q_t)
+
+    def free(self, system: GraspSystem) -> list[int]:
+        """The source's F/S/N contacts that carry no force (at most ``ZERO_FORCE F0``)."""
+        zero = system.scales.zero_force
+        out = []
+        for i, s in enumerate(self.source):
+            load = float(np.linalg.norm(self.forces[i])) if s == "F" else abs(float(self.f_c[i]))
+            if s != "D" and load <= zero:
+                out.append(i)
+        return out
+
+    def family(self, system: GraspSystem) -> Iterator[str]:
+        """The combinations that turn a non-empty subset of :meth:`free` contacts to D."""
+        free = self.free(system)
+        base = list(self.source)
+        for mask in itertools.product((False, True), repeat=len(free)):
+            if not any(mask):
+                continue
+            c = base.copy()
+            for i, go in zip(free, mask, strict=True):
+                if go:
+                    c[i] = "D"
+            yield "".join(c)
+
+    def check(self, kin: FamilyKinematics, combinations: list[str]) -> NDArray[np.bool_]:
+        """Which of ``combinations`` (members of :meth:`family`) this is a DAFC member of,
+        re-checked in physical units (module docstring), vectorised over them."""
+        sy, sc = kin.system, kin.system.scales
+        L, M = sy.L, sy.M
+        v = self.motion
+        size = float(np.linalg.norm(v))
+        F0 = sc.force
+        zero = sc.zero_force
+        rel_all = kin.A @ v  # (L, d) finger point minus object point velocity, per contact
+        kept_ok = np.ones(L, dtype=bool)  # the contact's own checks as in the source
+        free_ok = np.zeros(L, dtype=bool)  # may go (D): kept, no force, does not penetrate
+        W = np.zeros((L, sy.D))  # (L, D) wrench of each contact's force [N, N m]
+        grip = np.zeros(L)
+        eq_rows: list[Array] = []
+        eq_owner: list[int] = []
+        for i, s0 in enumerate(self.source):
+            A_i = kin.A[i]  # (d, M + D)
+            rel = rel_all[i]
+            n, G = sy.normals[i], sy.G_blocks[i]
+            along = float(n @ rel)
+            if s0 == "F":
+                kept_ok[i] = (float(np.linalg.norm(rel)) <= MOTION_TOL * size
+                              and float(np.max(kin.facets[i] @ self.forces[i])) <= FORCE_TOL * F0)
+                W[i] = G @ self.forces[i]
+                grip[i] = float(snap(n) @ self.forces[i])
+                free_ok[i] = float(np.linalg.norm(self.forces[i])) <= zero
+                eq_rows.extend(A_i)
+                eq_owner.extend([i] * len(A_i))
+            elif s0 in "SN":
+                n_f = float(self.f_c[i])
+                kept_ok[i] = abs(along) <= MOTION_TOL * size and n_f >= -FORCE_TOL * F0
+                if s0 == "S":
+                    kept_ok[i] &= float(np.linalg.norm(rel)) > SLIP_TOL * size
+                W[i] = n_f * (G @ (n - (sy.mu[i] * self.slips[i] if s0 == "S" else 0.0)))
+                grip[i] = n_f
+                free_ok[i] = abs(n_f) <= zero
+                eq_rows.append(kin.normal_rows[i])
+                eq_owner.append(i)
+            else:
+                kept_ok[i] = along <= ALLOW_TOL
+            free_ok[i] &= along <= ALLOW_TOL
+        go = np.array([[s != s0 for s, s0 in zip(c, self.source, strict=True)] for c in combinations],
+                      dtype=bool).reshape(len(combinations), L)  # (R, L) contacts turned to D
+        ok = np.all(kept_ok | go, axis=1) & np.all(free_ok | ~go, axis=1)
+        keep = ~go
+        w = sy.w_ex + keep.astype(float) @ W  # (R, D)
+        ok &= (keep.astype(float) @ grip) <= sc.grip_bound * (1.0 + FORCE_TOL)
+        Lr = self.Lambda_r_t
+        k = w @ Lr  # (R, a_bar)
+        ok &= np.linalg.norm(w - k @ Lr.T, axis=1) / F0 <= FORCE_TOL * (1.0 + sc.length)  # no passive part (W_2)
+        if eq_rows:
+            # the object part of w is an object motion of each combination: the motion
+            # [Lambda~_q k; Lambda~_r k] of the source keeps the contacts the combination keeps
+            vw = np.hstack([k @ self.Lambda_q_t.T, k @ Lr.T])  # (R, M + D)
+            res = np.abs(vw @ np.array(eq_rows).T)  # (R, #rows)
+            res[go[:, np.array(eq_owner)]] = 0.0
+            ok &= np.max(res, axis=1) <= MOTION_TOL * np.maximum(np.linalg.norm(vw, axis=1), 1e-300)
+        dr = v[M:]
+        ok &= w @ dr > sc.work_tol(dr)
+        return ok
+
+class FamilyKinematics:
+    """Per-scene data of the family checks: each contact's rows of ``A`` ``(L, d, M + D)``, its
+    normal row ``n^T A_i`` and its friction rows (unit, as in :func:`analysis.friction.friction_set`),
+    and the finger redundancy ``null(J_c)`` group by group (:meth:`separating`).
+
+    Contacts that share joints form a group (the connected components of "moved by a common
+    joint"); groups have disjoint joints, so ``null(J_c)`` is the direct sum of the null spaces of
+    the groups' own Jacobians, each fixed by the letters of the group's contacts. Per group,
+    letters and set of D-points to move, the least-norm redundancy motion that moves those D-points
+    away at unit normal speed is computed once and kept."""
+
+    def __init__(self, system: GraspSystem) -> None:
+        self.system = system
+        L, M = system.L, system.M
+        self.A = np.array([system.contact_A(i) for i in range(L)]).reshape(L, system.d, M + system.D)
+        self.normal_rows = np.einsum("ld,ldn->ln", system.normals, self.A)  # (L, M + D)
+        facets = system.pyramid[0]
+        self.facets = [snap(facets[i] / np.linalg.norm(facets[i], axis=1, keepdims=True)) for i in range(L)]
+        uses = [set(np.flatnonzero(np.any(system.J_blocks[i] != 0.0, axis=0)).tolist()) for i in range(L)]
+        parent = list(range(L))
+
+        def find(a: int) -> int:
+            while parent[a] != a:
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            return a
+
+        for a in range(L):
+            for b in range(a + 1, L):
+                if uses[a] & uses[b]:
+                    parent[find(a)] = find(b)
+        groups: dict[int, list[int]] = {}
+        for a in range(L):
+            groups.setdefault(find(a), []).append(a)
+        self.groups = [(C, sorted(set().union(*(uses[i] for i in C)))) for C in groups.values()]
+        self.M = M
+        self._cache: dict[tuple[int, str, tuple[int, ...]], Array | None] = {}
+
+    def _group_delta(self, g: int, letters: str, stuck: tuple[int, ...]) -> Array | None:
+        """``(M,)`` joint motion of group ``g`` in ``null(J)`` of its contacts with ``letters``
+        moving each contact of ``stuck`` away at unit normal speed (least norm), or None."""
+        key = (g, letters, stuck)
+        if key in self._cache:
+            return self._cache[key]
+        sy = self.system
+        C, Q = self.groups[g]
+        out: Array | None = None
+        if Q:
+            rows = []
+            for i, s in zip(C, letters, strict=True):
+                J = sy.J_blocks[i][:, Q]  # (d, |Q|)
+                if s == "F":
+                    rows.extend(J)
+                elif s in "SN":
+                    rows.append(sy.normals[i] @ J)
+            Z = null_space(np.array(rows)) if rows else np.eye(len(Q))  # (|Q|, r)
+            R = np.array([sy.normals[i] @ sy.J_blocks[i][:, Q] for i in stuck]) @ Z  # (k, r)
+            y = _unit_push(R)
+            if y is not None:
+                out = np.zeros(self.M)
+                out[Q] = Z @ y
+        self._cache[key] = out
+        return out
+
+    def separating(self, combination: str, motion: Array) -> Array | None:
+        """A motion of ``combination``'s motion space that separates every D-point strictly, or
+        None: ``motion`` (one of that space) plus the redundancy motions of the groups that move
+        the D-points it does not separate strictly, else plus the least-norm motion of the whole
+        motion space ``null(A_c)`` that does; checked. It lies in the interior of the allowable
+        cone (eq. 20), which is then full-dimensional, of dimension ``a_bar``."""
+        sy = self.system
+        d_pts = [i for i, s in enumerate(combination) if s == "D"]
+        if not d_pts:
+            return motion
+        rows = self.normal_rows[d_pts]  # (#D, M + D)
+        size = float(np.linalg.norm(motion))
+        stuck = {i for i, val in zip(d_pts, rows @ motion, strict=True) if val >= -STRICT_TOL * size}
+        if not stuck:
+            return motion
+        delta = np.zeros(sy.M + sy.D)
+        by_groups = True
+        for g, (C, Q) in enumerate(self.groups):
+            mine = tuple(i for i in C if i in stuck)
+            if not mine:
+                continue
+            dg = self._group_delta(g, "".join(combination[i] for i in C), mine) if Q else None
+            if dg is None:
+                by_groups = False  # a fixed-body D-point, or a group that cannot move its own
+                break
+            delta[: sy.M] += dg
+        if by_groups:
+            found = _strict(rows, motion, delta)
+            if found is not None:
+                return found
+        # the whole motion space: dr may move too (a fixed body's D-point is left by the object);
+        # a D-point whose normal velocity vanishes on all of it is no row of the cone
+        # (MotionSpace.B), decided only where that is clear-cut
+        sel = selection(sy, combination)
+        A_c = sel.H_c @ sy.A  # (L_c, M + D)
+        Lam = null_space(A_c) if sel.L_c else np.eye(sy.M + sy.D)  # (M + D, a)
+        order = sorted(stuck)
+        R = self.normal_rows[order] @ Lam  # (k, a)
+        size_R = np.linalg.norm(R, axis=1)  # (k,)
+        if np.any((size_R > ZERO_ROW) & (size_R < 1e3 * NULL_ROW_TOL)):
+            return None  # near the threshold of a zero row: the cone's own computation decides
+        live = size_R >= 1e3 * NULL_ROW_TOL
+        y = _unit_push(R[live]) if live.any() else np.zeros(Lam.shape[1])
+        if y is None:
+            return None
+        keep = [k for k, i in enumerate(d_pts) if i not in stuck or live[order.index(i)]]
+        return _strict(rows[keep], motion, Lam @ y)
+
+
+def _unit_push(R: Array) -> Array | None:
+    """The least-norm ``y`` with ``R y = -1`` when ``R`` ``(k, r)`` has full row rank (well
+    conditioned), else None."""
+    if R.shape[1] == 0 or R.shape[0] > R.shape[1]:
+        return None
+    sv = np.linalg.svd(R, compute_uv=False)
+    if float(sv[-1]) <= 1e-6 * max(1.0, float(sv[0])):
+        return None
+    return np.linalg.lstsq(R, -np.ones(R.shape[0]), rcond=RANK_RTOL)[0]
+
+
+def _strict(rows: Array, motion: Array, delta: Array) -> Array | None:
+    """``motion + t delta`` (a few step sizes) whose every row value is strictly negative."""
+    size, nd = float(np.linalg.norm(motion)), float(np.linalg.norm(delta))
+    if nd == 0.0:
+        return motion if bool(np.all(rows @ motion < -STRICT_TOL * size)) else None
+    for t in (1e-3, 1e-2, 1e-1, 1.0):
+        v2 = motion + t * size * delta / nd
+        if bool(np.all(rows @ v2 < -STRICT_TOL * float(np.linalg.norm(v2)))):
+            return v2
+    return None
+
+
+def slip_depends_on_redundancy(system: GraspSystem, combination: str) -> bool:
+    """:attr:`analysis.dafc.DAFCOracle.slip_depends_on_redundancy` from the finger redundancy
+    alone: ``P_s[:, a_bar:] = -J_s Lambda~_qr`` with ``Lambda~_qr = null(J_c)`` (the same basis)."""
+    sy = system
+    sel = selection(sy, combination)
+    if not sel.s_index or sy.M == 0:
+        return False
+    Z = null_space(sel.H_c @ sy.J) if sel.L_c else np.eye(sy.M)  # (M, r)
+    if Z.shape[1] == 0:
+        return False
+    J_s = sel.H_s @ sy.J  # (d #S, M)
+    return bool(np.abs(J_s @ Z).max() > 1e-9)
