@@ -44,7 +44,8 @@ from analysis.dafc import ALLOW_TOL, SLIP_TOL, DirectionTest
 from analysis.friction import kinetic_friction
 from analysis.linalg import RANK_RTOL, null_space
 from analysis.motion import NULL_ROW_TOL
-from analysis.scales import FORCE_TOL, snap
+from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, snap
+from analysis.solvers.highs import solve_sparse_lp
 
 #: Kinematic equalities of a reused motion (F sticks, S/N keeps contact), relative to its size:
 #: far above rounding (~1e-15), far below any motion.
@@ -114,6 +115,20 @@ class MemberCertificate:
                 continue
             c = base.copy()
             for i, go in zip(free, mask, strict=True):
+                if go:
+                    c[i] = "D"
+            yield "".join(c)
+
+    def below(self) -> Iterator[str]:
+        """Every combination that turns a non-empty subset of the source's F/S/N contacts to D
+        (the motion keeps those contacts, so it is a motion of each; its forces may not fit)."""
+        kept = [i for i, s in enumerate(self.source) if s != "D"]
+        base = list(self.source)
+        for mask in itertools.product((False, True), repeat=len(kept)):
+            if not any(mask):
+                continue
+            c = base.copy()
+            for i, go in zip(kept, mask, strict=True):
                 if go:
                     c[i] = "D"
             yield "".join(c)
@@ -198,6 +213,7 @@ class FamilyKinematics:
         self.normal_rows = np.einsum("ld,ldn->ln", system.normals, self.A)  # (L, M + D)
         facets = system.pyramid[0]
         self.facets = [snap(facets[i] / np.linalg.norm(facets[i], axis=1, keepdims=True)) for i in range(L)]
+        self.grip_normals = np.array([snap(system.normals[i]) for i in range(L)]).reshape(L, system.d)
         uses = [set(np.flatnonzero(np.any(system.J_blocks[i] != 0.0, axis=0)).tolist()) for i in range(L)]
         parent = list(range(L))
 
@@ -328,3 +344,145 @@ def slip_depends_on_redundancy(system: GraspSystem, combination: str) -> bool:
         return False
     J_s = sel.H_s @ sy.J  # (d #S, M)
     return bool(np.abs(J_s @ Z).max() > 1e-9)
+
+
+#: Penalty, per unit of the force scale, on the slack of the passive equalities in
+#: :func:`members_at` (each problem stays feasible; a point with slack decides nothing).
+ELASTIC = 1e4
+#: Slack of a passive equality that counts as none (units of the force scale).
+SLACK_TOL = 1e-12
+
+
+def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> NDArray[np.bool_]:
+    """For each ``(combination, motion)``: is the motion ``[dq; dr]`` (unit ``dr``) a DAFC (22)
+    member of the combination, by forces found here and re-checked in physical units? All the
+    force LPs of (22) at their fixed motions (the slips, hence the friction columns, fixed) are
+    solved as one block-diagonal LP: the blocks are independent, so each block's part of an optimal
+    point is optimal for its own problem. The passive equalities ``Xi^T w = 0`` (``Xi`` from the
+    combination's own motion space, batched SVDs) are elastic with the penalty ``ELASTIC``, so
+    every block is feasible; a block whose point needs slack, or does no work above the threshold,
+    decides nothing (False: the combination's own search decides). A True comes with forces that
+    pass :meth:`DAFCOracle.certify`'s checks: motion (F stick, S slide, D no penetration), friction
+    rows, grip bound, passive part of the net wrench and work, in physical units."""
+    sy = kin.system
+    sc = sy.scales
+    L, d, M, D = sy.L, sy.d, sy.M, sy.D
+    n = M + D
+    B = len(pairs)
+    if B == 0:
+        return np.zeros(0, dtype=bool)
+    F0 = sc.force
+    code = {"F": 0, "S": 1, "N": 1, "D": 2}
+    letters = np.array([[code[s] for s in c] for c, _ in pairs], dtype=np.intp)  # (B, L)
+    blocks = np.zeros((L, 3, d, n))
+    blocks[:, 0] = kin.A
+    blocks[:, 1, 0] = kin.normal_rows
+    mats = blocks[np.arange(L)[None, :], letters].reshape(B, L * d, n)  # (B, L d, n) zero-padded A_c
+    _, s1, Vt = np.linalg.svd(mats, full_matrices=True)  # Vt (B, n, n)
+    rank = np.sum(s1 > RANK_RTOL * np.maximum(1.0, s1[:, :1]), axis=1)  # (B,)
+    null_rows = np.arange(n)[None, :] >= rank[:, None]  # (B, n) rows of Vt spanning null(A_c)
+    obj = Vt[:, :, M:] * null_rows[:, :, None]  # (B, n, D) rows: the object parts of null(A_c)
+    _, s2, V2 = np.linalg.svd(obj, full_matrices=True)  # V2 (B, D, D)
+    a_bar = np.sum(s2 > RANK_RTOL * np.maximum(1.0, s2[:, :1]), axis=1)  # (B,)
+    # one block per pair: [lambda (F: weights of the friction pyramid's generators, S/N: the normal
+    # force), units of F0; e+; e-], rows: grip, passive equalities
+    gens = sy.pyramid[1]  # (L, k', d) generators of each contact's friction cone
+    cols_c: list[Array] = []
+    trip_r: list[Array] = []
+    trip_c: list[Array] = []
+    trip_v: list[Array] = []
+    row_lo: list[Array] = []
+    row_up: list[Array] = []
+    layout: list[tuple[int, int, int, Array, Array, Array]] = []
+    n_col = n_row = 0
+    ok = np.ones(B, dtype=bool)
+    for b, (comb, v) in enumerate(pairs):
+        rel = kin.A @ v  # (L, d) finger point minus object point velocity
+        size = float(np.linalg.norm(v))
+        Fc: list[Array] = []  # contact force (L, d) per unit of each unknown
+        for j, s in enumerate(comb):
+            n_j = sy.normals[j]
+            along = float(n_j @ rel[j])
+            if s == "F":
+                ok[b] &= float(np.linalg.norm(rel[j])) <= MOTION_TOL * size
+                for e in gens[j]:
+                    col = np.zeros((L, d))
+                    col[j] = e
+                    Fc.append(col)
+            elif s in "SN":
+                ok[b] &= abs(along) <= MOTION_TOL * size
+                t = np.zeros(d)
+                if s == "S":
+                    slip = -rel[j]  # the object point relative to the finger
+                    ok[b] &= float(np.linalg.norm(slip)) > SLIP_TOL * size
+                    t = -sy.mu[j] * slip / max(1e-300, float(np.linalg.norm(slip)))
+                col = np.zeros((L, d))
+                col[j] = n_j + t
+                Fc.append(col)
+            else:
+                ok[b] &= along <= ALLOW_TOL
+        Xi = V2[b, a_bar[b]:, :]  # (p, D) complement of the object motions
+        Fm = np.array(Fc).reshape(-1, L, d)  # (k, L, d)
+        W = np.einsum("ldc,klc->dk", sy.G_blocks.transpose(0, 1, 2), Fm) if len(Fc) else np.zeros((D, 0))
+        k, p = W.shape[1], Xi.shape[0]
+        dr = v[M:]
+        cols_c.append(np.r_[dr @ W, np.full(2 * p, -ELASTIC)])  # work per unit (units of F0), penalty
+        grip = np.einsum("lc,klc->k", kin.grip_normals, Fm) if k else np.zeros(0)  # grip rows' normals
+        nz = np.flatnonzero(grip)
+        trip_r.append(np.full(nz.size, n_row))
+        trip_c.append(n_col + nz)
+        trip_v.append(grip[nz])
+        row_lo.append(np.array([-np.inf]))
+        row_up.append(np.array([GRIP_BOUND]))
+        n_row += 1
+        E = snap(Xi @ W)  # (p, k) passive rows, noise-level entries zero (as the oracle's)
+        rhs = snap(-(Xi @ sy.w_ex) / F0)
+        rr, cc = np.nonzero(E)
+        trip_r.extend([n_row + rr, n_row + np.arange(p), n_row + np.arange(p)])
+        trip_c.extend([n_col + cc, n_col + k + np.arange(p), n_col + k + p + np.arange(p)])
+        trip_v.extend([E[rr, cc], np.ones(p), -np.ones(p)])
+        row_lo.append(rhs)
+        row_up.append(rhs)
+        n_row += p
+        layout.append((n_col, k, p, Fm, Xi, dr))
+        n_col += k + 2 * p
+    rows_i = np.concatenate(trip_r).astype(np.int64)
+    cols_i = np.concatenate(trip_c).astype(np.int64)
+    vals = np.concatenate(trip_v)
+    order = np.lexsort((rows_i, cols_i))
+    rows_i, cols_i, vals = rows_i[order], cols_i[order], vals[order]
+    start = np.concatenate([[0], np.cumsum(np.bincount(cols_i, minlength=n_col))]).astype(np.int32)
+    status, x = solve_sparse_lp(np.concatenate(cols_c), start, rows_i.astype(np.int32), vals,
+                                np.concatenate(row_lo), np.concatenate(row_up), np.zeros(n_col),
+                                np.full(n_col, np.inf), maximize=True, feasibility=LP_FEAS_TOL)
+    if status != "optimal" or x is None:
+        return np.zeros(B, dtype=bool)  # (every block is feasible and bounded: undecided, no verdict)
+    for b, (comb, _) in enumerate(pairs):
+        if not ok[b]:
+            continue
+        c0, k, p, Fm, Xi, dr = layout[b]
+        lam, e = x[c0:c0 + k], x[c0 + k:c0 + k + 2 * p]
+        if float(np.max(np.abs(e), initial=0.0)) > SLACK_TOL:
+            ok[b] = False
+            continue
+        forces = np.einsum("k,klc->lc", lam, Fm) * F0  # (L, d) contact forces [N]
+        w = np.einsum("ldc,lc->d", sy.G_blocks, forces) + sy.w_ex  # (D,)
+        fric, grip = 0.0, 0.0
+        for j, s in enumerate(comb):
+            if s == "F":
+                fric = max(fric, float(np.max(kin.facets[j] @ forces[j])))
+                grip += float(kin.grip_normals[j] @ forces[j])
+            elif s in "SN":
+                n_f = float(sy.normals[j] @ forces[j]) if s == "N" else float(lam_normal(lam, Fm, j)) * F0
+                fric = max(fric, -n_f)
+                grip += n_f
+        ok[b] = bool(fric <= FORCE_TOL * F0 and grip <= sc.grip_bound * (1.0 + FORCE_TOL)
+                     and float(np.max(np.abs(Xi @ w), initial=0.0)) / F0 <= FORCE_TOL * (1.0 + sc.length)
+                     and float(dr @ w) > sc.work_tol(dr))
+    return ok
+
+
+def lam_normal(lam: Array, Fm: Array, j: int) -> float:
+    """The normal force (units of the unknowns) of the S/N-point ``j``: its one unknown's weight."""
+    k = int(np.flatnonzero(np.any(Fm[:, j] != 0.0, axis=1))[0])
+    return float(lam[k])

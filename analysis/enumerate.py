@@ -16,6 +16,7 @@ Pruning, all exact:
 
 from __future__ import annotations
 
+import heapq
 import itertools
 import multiprocessing as mp
 import os
@@ -26,10 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis._types import Array
 from analysis.combination import CombinationParts, CombinationSummary, no_grasp_reason, summarize_with_member
 from analysis.contacts import GraspSystem
 from analysis.dafc import allowable_cone
-from analysis.dafc_family import FamilyKinematics, MemberCertificate, slip_depends_on_redundancy
+from analysis.dafc_family import FamilyKinematics, MemberCertificate, members_at, slip_depends_on_redundancy
 from analysis.exceptions import CombinationError
 from analysis.motion import motion_dims
 from analysis.stationary_table import CLASS, stationary_verdicts
@@ -70,7 +72,9 @@ class EnumerationStats:
     dafc_lps: int = 0  # LPs of the DAFC oracles (membership, redundancy, relaxation, realisability)
     stopped_at_limit: bool = False  # the enumeration stopped after ``limit`` feasible combinations
     dafc_searched: int = 0  # combinations whose DAFC was decided by their own search
-    dafc_shared: int = 0  # combinations decided by a re-checked member of a stronger one
+    dafc_shared: int = 0  # combinations decided by a re-checked member (motion) of a stronger one
+    dafc_batched: int = 0  # of the DAFC LPs, force LPs at a stronger one's member motion (one HiGHS call a batch)
+    dafc_ahead_unused: int = 0  # own searches run ahead in a worker, then decided by a member first
 
     @property
     def lps(self) -> int:
@@ -85,7 +89,10 @@ def _order(combos: Iterable[str]) -> list[str]:
 #: Enumerations larger than this are split over worker processes (when ``workers`` > 1).
 PARALLEL_THRESHOLD = 2000
 #: Own DAFC searches run ahead of the committed order per worker (speculation window).
-AHEAD = 3
+AHEAD = 8
+#: Member motions of stronger combinations tried per combination, and force LPs per HiGHS call.
+MOTIONS_PER_ROW = 2
+BATCH = 256
 
 _WORKER: dict[str, object] = {}
 
@@ -211,29 +218,68 @@ class _Enumeration:
             self._share(cert)
 
     def _share(self, cert: MemberCertificate) -> None:
-        """Decide the undecided combinations of the certificate's family that it passes for."""
+        """Decide the undecided combinations of the certificate's family that it passes for, and
+        queue its motion for the force LPs of the others below its combination (:meth:`_resolve`)."""
         sy = self.system
         family = [c for c in cert.family(sy) if c in self.pending and c not in self.results]
-        if not family:
-            return
-        for c, good in zip(family, cert.check(self.kin, family), strict=True):
-            if not good:
-                continue
-            ak, abk = self.dims[c]
-            dim = self._cone_dim(c, cert)
-            if dim is None:
-                continue
-            exact = "S" not in c or (abk == 1 and not slip_depends_on_redundancy(sy, c))
-            self.results[c] = CombinationSummary(c, True, "feasible", ak, abk, dim, sy.D - abk, exact,
-                                                 cert.direction, cert.motion)
-            self.stats.dafc_shared += 1
+        if family:
+            for c, good in zip(family, cert.check(self.kin, family), strict=True):
+                if good:
+                    self._feasible(c, cert.motion)
+        for c in cert.below():
+            if c in self.pending and c not in self.results:
+                motions = self.queue.setdefault(c, [])
+                if not motions:
+                    heapq.heappush(self.heap, (self.pos[c], c))
+                if len(motions) < MOTIONS_PER_ROW:
+                    motions.append(cert.motion)
 
-    def _cone_dim(self, c: str, cert: MemberCertificate) -> int | None:
+    def _feasible(self, c: str, motion: Array) -> bool:
+        """Record ``c`` as feasible with the member motion ``motion`` (already certified for it),
+        with the dimension of its allowable cone; False when that cone has no direction."""
+        sy = self.system
+        ak, abk = self.dims[c]
+        dim = self._cone_dim(c, motion)
+        if dim is None:
+            return False
+        exact = "S" not in c or (abk == 1 and not slip_depends_on_redundancy(sy, c))
+        self.results[c] = CombinationSummary(c, True, "feasible", ak, abk, dim, sy.D - abk, exact,
+                                             motion[sy.M:].copy(), motion)
+        self.stats.dafc_shared += 1
+        self.queue.pop(c, None)
+        return True
+
+    def _resolve(self, c: str) -> None:
+        """Try the queued motions of stronger combinations' members on ``c`` and the next queued
+        combinations (strongest first), all force LPs in one (:func:`members_at`)."""
+        while c in self.queue and c not in self.results:
+            batch: list[str] = []
+            while self.heap and len(batch) < BATCH:
+                _, row = heapq.heappop(self.heap)
+                if row in self.queue and row not in self.results:
+                    batch.append(row)
+            if not batch:
+                return
+            pairs = [(row, self.queue[row][0]) for row in batch]
+            good = members_at(self.kin, pairs)
+            self.stats.dafc_lps += len(pairs)
+            self.stats.dafc_batched += len(pairs)
+            for (row, motion), ok in zip(pairs, good, strict=True):
+                if ok and self._feasible(row, motion):
+                    continue
+                rest = self.queue.get(row, [])[1:]
+                if rest:
+                    self.queue[row] = rest
+                    heapq.heappush(self.heap, (self.pos[row], row))
+                else:
+                    self.queue.pop(row, None)
+
+    def _cone_dim(self, c: str, motion: Array) -> int | None:
         """The dimension of the allowable cone (the table's DAFC dimension for a member): ``a_bar``
         when a motion that separates every D-point strictly proves the cone full-dimensional
         (:meth:`FamilyKinematics.separating`), else from its generators
         (cdd), as :func:`analysis.dafc.dafc_nonempty` computes it; None when it has none."""
-        if self.kin.separating(c, cert.motion) is not None:
+        if self.kin.separating(c, motion) is not None:
             return self.dims[c][1]
         parts = CombinationParts.build(self.system, c)
         dirs = allowable_cone(parts.ms).all_directions()
@@ -243,8 +289,12 @@ class _Enumeration:
 
     def _dafc(self, workers: int) -> None:
         self.pending = set(self.dafc_rows)
+        self.pos = {c: k for k, c in enumerate(self.dafc_rows)}
+        self.queue: dict[str, list[Array]] = {}  # queued member motions of stronger combinations
+        self.heap: list[tuple[int, str]] = []  # their combinations, strongest first
         if workers <= 1 or len(self.dafc_rows) < 2:
             for c in self.dafc_rows:
+                self._resolve(c)
                 if c not in self.results:
                     self._commit(c, *_own_search(self.system, c))
                     self._tick()
@@ -256,23 +306,27 @@ class _Enumeration:
             futures: dict[str, Future[tuple[CombinationSummary, MemberCertificate | None, int]]] = {}
             ahead = 0
             for k, c in enumerate(self.dafc_rows):
+                self._resolve(c)
                 if c in self.results:
-                    futures.pop(c, None)
+                    fut = futures.pop(c, None)
+                    if fut is not None and not fut.cancel():
+                        self.stats.dafc_ahead_unused += 1  # it ran: decided by a member meanwhile
                     continue
-                # keep the window full: the next undecided combinations after c
+                # keep the window full: the next combinations after c that nothing decides yet
                 for nxt in self.dafc_rows[max(k, ahead):]:
                     ahead += 1
                     if len(futures) >= AHEAD * workers:
                         ahead -= 1
                         break
-                    if nxt not in self.results and nxt not in futures:
+                    if nxt not in self.results and nxt not in futures and nxt not in self.queue:
                         futures[nxt] = pool.submit(_worker_search, nxt)
                 fut = futures.pop(c, None)
                 out = fut.result() if fut is not None else _own_search(self.system, c)
                 self._commit(c, *out)
                 self._tick()
                 for done in [n for n in futures if n in self.results]:
-                    futures.pop(done).cancel()
+                    if not futures.pop(done).cancel():
+                        self.stats.dafc_ahead_unused += 1
 
     def _cut(self, limit: int) -> None:
         """Keep the rows up to the ``limit``-th feasible one (strongest-first order)."""
