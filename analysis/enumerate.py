@@ -16,16 +16,16 @@ Pruning, all exact:
 
 from __future__ import annotations
 
-import heapq
 import itertools
 import multiprocessing as mp
 import os
 import re
 from collections.abc import Callable, Iterable
-from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from analysis._types import Array
 from analysis.combination import CombinationParts, CombinationSummary, no_grasp_reason, summarize_with_member
@@ -74,7 +74,6 @@ class EnumerationStats:
     dafc_searched: int = 0  # combinations whose DAFC was decided by their own search
     dafc_shared: int = 0  # combinations decided by a re-checked member (motion) of a stronger one
     dafc_batched: int = 0  # of the DAFC LPs, force LPs at a stronger one's member motion (one HiGHS call a batch)
-    dafc_ahead_unused: int = 0  # own searches run ahead in a worker, then decided by a member first
 
     @property
     def lps(self) -> int:
@@ -88,8 +87,6 @@ def _order(combos: Iterable[str]) -> list[str]:
 
 #: Enumerations larger than this are split over worker processes (when ``workers`` > 1).
 PARALLEL_THRESHOLD = 2000
-#: Own DAFC searches run ahead of the committed order per worker (speculation window).
-AHEAD = 8
 #: Member motions of stronger combinations tried per combination, and force LPs per HiGHS call.
 MOTIONS_PER_ROW = 2
 BATCH = 256
@@ -99,6 +96,32 @@ _WORKER: dict[str, object] = {}
 
 def _worker_init(system: GraspSystem) -> None:
     _WORKER["system"] = system
+    _WORKER["kin"] = FamilyKinematics(system)
+
+
+def _shared_dims(system: GraspSystem, kin: FamilyKinematics, rows: list[tuple[str, Array, int]]
+                 ) -> list[tuple[int | None, bool]]:
+    """For each row decided by a stronger row's member ``(combination, member motion, a_bar)``: the
+    dimension of its allowable cone, the table's DAFC dimension for a member (``a_bar`` when a
+    motion that separates every D-point strictly proves the cone full-dimensional,
+    :meth:`FamilyKinematics.separating`, else from cdd's generators as :func:`dafc_nonempty`
+    computes it; None when it has none), and its exactness (as :func:`dafc_nonempty`: no S-point,
+    or ``a_bar = 1`` with slips that do not depend on the redundancy)."""
+    out: list[tuple[int | None, bool]] = []
+    for c, motion, a_bar in rows:
+        dim: int | None = a_bar
+        if kin.separating(c, motion) is None:
+            dirs = allowable_cone(CombinationParts.build(system, c).ms).all_directions()
+            dim = int(np.linalg.matrix_rank(dirs, tol=1e-9)) if dirs.shape[0] else None
+        exact = "S" not in c or (a_bar == 1 and not slip_depends_on_redundancy(system, c))
+        out.append((dim, exact))
+    return out
+
+
+def _worker_dims(rows: list[tuple[str, Array, int]]) -> list[tuple[int | None, bool]]:
+    system, kin = _WORKER["system"], _WORKER["kin"]
+    assert isinstance(system, GraspSystem) and isinstance(kin, FamilyKinematics)
+    return _shared_dims(system, kin, rows)
 
 
 def _own_search(system: GraspSystem, combination: str) -> tuple[CombinationSummary, MemberCertificate | None, int]:
@@ -109,6 +132,12 @@ def _own_search(system: GraspSystem, combination: str) -> tuple[CombinationSumma
     summary, member = summarize_with_member(parts, stationary_known=True, oracle=oracle, realisable=False)
     cert = MemberCertificate.of(parts, member) if member is not None else None
     return summary, cert, oracle.lp_count
+
+
+def _worker_batch(pairs: list[tuple[str, Array]]) -> NDArray[np.bool_]:
+    kin = _WORKER["kin"]
+    assert isinstance(kin, FamilyKinematics)
+    return members_at(kin, pairs)
 
 
 def _worker_search(combination: str) -> tuple[CombinationSummary, MemberCertificate | None, int]:
@@ -203,7 +232,7 @@ class _Enumeration:
                                         D - abk, True, None)
         st.pruned_stationary = int(np.sum(~verdicts.own))  # (18) decided without an LP of its own
         self._tick()
-        self._dafc(workers)
+        self._dafc(workers, limit)
         if limit is not None:
             self._cut(limit)
         return res, st
@@ -229,104 +258,105 @@ class _Enumeration:
         for c in cert.below():
             if c in self.pending and c not in self.results:
                 motions = self.queue.setdefault(c, [])
-                if not motions:
-                    heapq.heappush(self.heap, (self.pos[c], c))
                 if len(motions) < MOTIONS_PER_ROW:
                     motions.append(cert.motion)
 
     def _feasible(self, c: str, motion: Array) -> bool:
-        """Record ``c`` as feasible with the member motion ``motion`` (already certified for it),
-        with the dimension of its allowable cone; False when that cone has no direction."""
+        """Record ``c`` as feasible with the member motion ``motion`` (already certified for it);
+        its DAFC dimension and exactness follow after the loop (:meth:`_finish_shared`)."""
         sy = self.system
         ak, abk = self.dims[c]
-        dim = self._cone_dim(c, motion)
-        if dim is None:
-            return False
-        exact = "S" not in c or (abk == 1 and not slip_depends_on_redundancy(sy, c))
-        self.results[c] = CombinationSummary(c, True, "feasible", ak, abk, dim, sy.D - abk, exact,
+        self.results[c] = CombinationSummary(c, True, "feasible", ak, abk, 0, sy.D - abk, False,
                                              motion[sy.M:].copy(), motion)
+        self.shared.append(c)
         self.stats.dafc_shared += 1
         self.queue.pop(c, None)
         return True
 
-    def _resolve(self, c: str) -> None:
-        """Try the queued motions of stronger combinations' members on ``c`` and the next queued
-        combinations (strongest first), all force LPs in one (:func:`members_at`)."""
-        while c in self.queue and c not in self.results:
-            batch: list[str] = []
-            while self.heap and len(batch) < BATCH:
-                _, row = heapq.heappop(self.heap)
-                if row in self.queue and row not in self.results:
-                    batch.append(row)
-            if not batch:
-                return
-            pairs = [(row, self.queue[row][0]) for row in batch]
-            good = members_at(self.kin, pairs)
-            self.stats.dafc_lps += len(pairs)
-            self.stats.dafc_batched += len(pairs)
-            for (row, motion), ok in zip(pairs, good, strict=True):
-                if ok and self._feasible(row, motion):
-                    continue
-                rest = self.queue.get(row, [])[1:]
-                if rest:
-                    self.queue[row] = rest
-                    heapq.heappush(self.heap, (self.pos[row], row))
-                else:
-                    self.queue.pop(row, None)
+    def _finish_shared(self, pool: ProcessPoolExecutor | None, workers: int = 1) -> None:
+        """The DAFC dimension and exactness of the rows decided by a stronger row's member
+        (:func:`_shared_dims`, in the worker processes when there are any); a row whose allowable
+        cone has no direction (cdd failing) gets its own search."""
+        rows: list[tuple[str, Array, int]] = []
+        for c in self.shared:
+            m = self.results[c].example_motion
+            assert m is not None
+            rows.append((c, m, self.dims[c][1]))
+        if pool is None:
+            out = _shared_dims(self.system, self.kin, rows)
+        else:
+            n = max(1, len(rows) // (4 * workers) + 1)
+            parts = [rows[k:k + n] for k in range(0, len(rows), n)]
+            out = [x for chunk in pool.map(_worker_dims, parts) for x in chunk]
+        for (c, _, _), (dim, exact) in zip(rows, out, strict=True):
+            r = self.results[c]
+            if dim is None:
+                summary, _, lps = _own_search(self.system, c)
+                self.results[c] = summary
+                self.stats.dafc_lps += lps
+                continue
+            self.results[c] = CombinationSummary(c, True, "feasible", r.a, r.a_bar, dim, r.dim_dpfc, exact,
+                                                 r.example_direction, r.example_motion)
 
-    def _cone_dim(self, c: str, motion: Array) -> int | None:
-        """The dimension of the allowable cone (the table's DAFC dimension for a member): ``a_bar``
-        when a motion that separates every D-point strictly proves the cone full-dimensional
-        (:meth:`FamilyKinematics.separating`), else from its generators
-        (cdd), as :func:`analysis.dafc.dafc_nonempty` computes it; None when it has none."""
-        if self.kin.separating(c, motion) is not None:
-            return self.dims[c][1]
-        parts = CombinationParts.build(self.system, c)
-        dirs = allowable_cone(parts.ms).all_directions()
-        if dirs.shape[0] == 0:
-            return None
-        return int(np.linalg.matrix_rank(dirs, tol=1e-9))
-
-    def _dafc(self, workers: int) -> None:
+    def _dafc(self, workers: int, limit: int | None) -> None:
+        """DAFC of the rows whose stationary grasp exists, level by level (the sum of the force
+        classes, strongest first): a member shares only with weaker combinations (turning contacts
+        to D lowers the level), so the rows of one level depend only on the levels above and are
+        decided together, in the worker processes when there are any: first the force LPs at the
+        queued member motions of stronger rows (:func:`members_at`, batches of ``BATCH`` in the
+        strongest-first order), then their own searches; results are committed in that order, so
+        the table does not depend on the number of workers."""
         self.pending = set(self.dafc_rows)
         self.pos = {c: k for k, c in enumerate(self.dafc_rows)}
         self.queue: dict[str, list[Array]] = {}  # queued member motions of stronger combinations
-        self.heap: list[tuple[int, str]] = []  # their combinations, strongest first
-        if workers <= 1 or len(self.dafc_rows) < 2:
-            for c in self.dafc_rows:
-                self._resolve(c)
-                if c not in self.results:
-                    self._commit(c, *_own_search(self.system, c))
-                    self._tick()
-            return
-        # own searches run ahead in worker processes; results are committed strictly in order
-        ctx = mp.get_context("fork")
-        with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
-                                 initargs=(self.system,)) as pool:
-            futures: dict[str, Future[tuple[CombinationSummary, MemberCertificate | None, int]]] = {}
-            ahead = 0
-            for k, c in enumerate(self.dafc_rows):
-                self._resolve(c)
-                if c in self.results:
-                    fut = futures.pop(c, None)
-                    if fut is not None and not fut.cancel():
-                        self.stats.dafc_ahead_unused += 1  # it ran: decided by a member meanwhile
-                    continue
-                # keep the window full: the next combinations after c that nothing decides yet
-                for nxt in self.dafc_rows[max(k, ahead):]:
-                    ahead += 1
-                    if len(futures) >= AHEAD * workers:
-                        ahead -= 1
+        self.shared: list[str] = []  # decided by a stronger combination's member
+        levels: dict[int, list[str]] = {}
+        for c in self.dafc_rows:
+            levels.setdefault(sum(CLASS[x] for x in c), []).append(c)
+        pool = None
+        if workers > 1 and len(self.dafc_rows) > 1:
+            pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"), initializer=_worker_init,
+                                       initargs=(self.system,))
+        try:
+            for level in sorted(levels, reverse=True):
+                rows = levels[level]
+                while True:  # the queued motions, first ones first
+                    todo = [c for c in rows if c not in self.results and self.queue.get(c)]
+                    if not todo:
                         break
-                    if nxt not in self.results and nxt not in futures and nxt not in self.queue:
-                        futures[nxt] = pool.submit(_worker_search, nxt)
-                fut = futures.pop(c, None)
-                out = fut.result() if fut is not None else _own_search(self.system, c)
-                self._commit(c, *out)
+                    batches = [[(c, self.queue[c][0]) for c in todo[k:k + BATCH]] for k in range(0, len(todo), BATCH)]
+                    outs = (pool.map(_worker_batch, batches) if pool is not None else
+                            (members_at(self.kin, b) for b in batches))
+                    for pairs, good in zip(batches, outs, strict=True):
+                        self.stats.dafc_lps += len(pairs)
+                        self.stats.dafc_batched += len(pairs)
+                        for (c, motion), ok in zip(pairs, good, strict=True):
+                            if ok:
+                                self._feasible(c, motion)
+                            else:
+                                self.queue[c] = self.queue[c][1:]
+                todo = [c for c in rows if c not in self.results]
+                found = (pool.map(_worker_search, todo, chunksize=max(1, min(8, len(todo) // (8 * workers))))
+                         if pool is not None else (_own_search(self.system, c) for c in todo))
+                for c, out in zip(todo, found, strict=True):
+                    self._commit(c, *out)
                 self._tick()
-                for done in [n for n in futures if n in self.results]:
-                    if not futures.pop(done).cancel():
-                        self.stats.dafc_ahead_unused += 1
+                if limit is not None and self._reached(limit, rows[-1]):
+                    break
+            self._finish_shared(pool, workers)
+        finally:
+            if pool is not None:
+                pool.shutdown()
+
+    def _reached(self, limit: int, last: str) -> bool:
+        """Are ``limit`` rows feasible among the rows up to ``last`` (strongest-first order)?"""
+        feasible = 0
+        for c in self.ordered:
+            r = self.results.get(c)
+            feasible += bool(r is not None and r.feasible)
+            if c == last:
+                break
+        return feasible >= limit
 
     def _cut(self, limit: int) -> None:
         """Keep the rows up to the ``limit``-th feasible one (strongest-first order)."""
