@@ -69,8 +69,8 @@ class MemberCertificate:
     f_c: Array  # (L,) per contact: its normal force [N] (S/N), 0 (D), nan (F: see forces)
     forces: Array  # (L, d) per F-point its force [N]; zero rows elsewhere
     slips: Array  # (L, d) per S-point its unit slip (object relative to the finger); zero elsewhere
-    Lambda_r_t: Array  # (D, a_bar) object motions of the source
-    Lambda_q_t: Array  # (M, a_bar) their least-norm finger motions
+    Lambda_r_t: Array  # (D, a_bar) orthonormal basis of the object motions of the source
+    Lambda: Array  # (M + D, a) basis of the source's motion space null(A_c) (eq. 7)
 
     @classmethod
     def of(cls, parts: CombinationParts, t: DirectionTest) -> MemberCertificate | None:
@@ -94,7 +94,7 @@ class MemberCertificate:
             elif s in "SN":
                 f_c[i] = float(f[0])
         return cls(sel.combination, t.direction, ms.Phi_full @ t.zeta_c, f_c, forces, slips,
-                   ms.Lambda_r_t, ms.Lambda_q_t)
+                   ms.Lambda_r_t, ms.Lambda)
 
     def free(self, system: GraspSystem) -> list[int]:
         """The source's F/S/N contacts that carry no force (at most ``ZERO_FORCE F0``)."""
@@ -185,9 +185,10 @@ class MemberCertificate:
         k = w @ Lr  # (R, a_bar)
         ok &= np.linalg.norm(w - k @ Lr.T, axis=1) / F0 <= FORCE_TOL * (1.0 + sc.length)  # no passive part (W_2)
         if eq_rows:
-            # the object part of w is an object motion of each combination: the motion
-            # [Lambda~_q k; Lambda~_r k] of the source keeps the contacts the combination keeps
-            vw = np.hstack([k @ self.Lambda_q_t.T, k @ Lr.T])  # (R, M + D)
+            # the object part of w is an object motion of each combination: the motion of the
+            # source's motion space with that object part keeps the contacts the combination keeps
+            Lam = self.Lambda
+            vw = (k @ Lr.T) @ (Lam @ np.linalg.pinv(Lam[M:], rcond=RANK_RTOL)).T  # (R, M + D)
             res = np.abs(vw @ np.array(eq_rows).T)  # (R, #rows)
             res[go[:, np.array(eq_owner)]] = 0.0
             ok &= np.max(res, axis=1) <= MOTION_TOL * np.maximum(np.linalg.norm(vw, axis=1), 1e-300)
@@ -353,9 +354,10 @@ ELASTIC = 1e4
 SLACK_TOL = 1e-12
 
 
-def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> NDArray[np.bool_]:
-    """For each ``(combination, motion)``: is the motion ``[dq; dr]`` (unit ``dr``) a DAFC (22)
-    member of the combination, by forces found here and re-checked in physical units? All the
+def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[MemberCertificate | None]:
+    """For each ``(combination, motion)``: the certificate when the motion ``[dq; dr]`` (unit
+    ``dr``) is a DAFC (22) member of the combination, by forces found here and re-checked in
+    physical units, else None. All the
     force LPs of (22) at their fixed motions (the slips, hence the friction columns, fixed) are
     solved as one block-diagonal LP: the blocks are independent, so each block's part of an optimal
     point is optimal for its own problem. The passive equalities ``Xi^T w = 0`` (``Xi`` from the
@@ -370,7 +372,7 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> NDArray
     n = M + D
     B = len(pairs)
     if B == 0:
-        return np.zeros(0, dtype=bool)
+        return []
     F0 = sc.force
     code = {"F": 0, "S": 1, "N": 1, "D": 2}
     letters = np.array([[code[s] for s in c] for c, _ in pairs], dtype=np.intp)  # (B, L)
@@ -456,8 +458,10 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> NDArray
                                 np.concatenate(row_lo), np.concatenate(row_up), np.zeros(n_col),
                                 np.full(n_col, np.inf), maximize=True, feasibility=LP_FEAS_TOL)
     if status != "optimal" or x is None:
-        return np.zeros(B, dtype=bool)  # (every block is feasible and bounded: undecided, no verdict)
-    for b, (comb, _) in enumerate(pairs):
+        return [None] * B  # (every block is feasible and bounded: undecided, no verdict)
+    out: list[MemberCertificate | None] = []
+    for b, (comb, v) in enumerate(pairs):
+        out.append(None)
         if not ok[b]:
             continue
         c0, k, p, Fm, Xi, dr = layout[b]
@@ -476,10 +480,25 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> NDArray
                 n_f = float(sy.normals[j] @ forces[j]) if s == "N" else float(lam_normal(lam, Fm, j)) * F0
                 fric = max(fric, -n_f)
                 grip += n_f
-        ok[b] = bool(fric <= FORCE_TOL * F0 and grip <= sc.grip_bound * (1.0 + FORCE_TOL)
-                     and float(np.max(np.abs(Xi @ w), initial=0.0)) / F0 <= FORCE_TOL * (1.0 + sc.length)
-                     and float(dr @ w) > sc.work_tol(dr))
-    return ok
+        if not (fric <= FORCE_TOL * F0 and grip <= sc.grip_bound * (1.0 + FORCE_TOL)
+                and float(np.max(np.abs(Xi @ w), initial=0.0)) / F0 <= FORCE_TOL * (1.0 + sc.length)
+                and float(dr @ w) > sc.work_tol(dr)):
+            continue
+        f_c = np.zeros(L)
+        f_F = np.zeros((L, d))
+        slips = np.zeros((L, d))
+        rel = kin.A @ v
+        for j, s in enumerate(comb):
+            if s == "F":
+                f_c[j] = np.nan
+                f_F[j] = forces[j]
+            elif s in "SN":
+                f_c[j] = float(lam_normal(lam, Fm, j)) * F0
+                if s == "S":
+                    slips[j] = -rel[j] / float(np.linalg.norm(rel[j]))
+        out[b] = MemberCertificate(comb, dr.copy(), v, f_c, f_F, slips, V2[b, :a_bar[b], :].T.copy(),
+                                   Vt[b, rank[b]:, :].T.copy())
+    return out
 
 
 def lam_normal(lam: Array, Fm: Array, j: int) -> float:

@@ -90,6 +90,8 @@ PARALLEL_THRESHOLD = 2000
 #: Member motions of stronger combinations tried per combination, and force LPs per HiGHS call.
 MOTIONS_PER_ROW = 2
 BATCH = 256
+#: Combinations per chunk of the batched motion-space dimensions.
+DIMS_CHUNK = 16384
 
 _WORKER: dict[str, object] = {}
 
@@ -134,7 +136,13 @@ def _own_search(system: GraspSystem, combination: str) -> tuple[CombinationSumma
     return summary, cert, oracle.lp_count
 
 
-def _worker_batch(pairs: list[tuple[str, Array]]) -> NDArray[np.bool_]:
+def _worker_dims_of(combinations: list[str]) -> tuple[NDArray[np.int_], NDArray[np.int_]]:
+    system = _WORKER["system"]
+    assert isinstance(system, GraspSystem)
+    return motion_dims(system, combinations)
+
+
+def _worker_batch(pairs: list[tuple[str, Array]]) -> list[MemberCertificate | None]:
     kin = _WORKER["kin"]
     assert isinstance(kin, FamilyKinematics)
     return members_at(kin, pairs)
@@ -202,9 +210,26 @@ class _Enumeration:
             self.progress(len(self.results), len(self.ordered))
 
     def run(self, workers: int, limit: int | None) -> tuple[dict[str, CombinationSummary], EnumerationStats]:
+        self.pool = None
+        if workers > 1 and len(self.ordered) > 1:
+            self.pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"), initializer=_worker_init,
+                                            initargs=(self.system,))
+        try:
+            return self._run(workers, limit)
+        finally:
+            if self.pool is not None:
+                self.pool.shutdown()
+
+    def _run(self, workers: int, limit: int | None) -> tuple[dict[str, CombinationSummary], EnumerationStats]:
         sy, st, res = self.system, self.stats, self.results
         D = sy.D
-        a, a_bar = motion_dims(sy, self.ordered) if self.ordered else (np.zeros(0, int), np.zeros(0, int))
+        a, a_bar = np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+        if self.ordered:
+            chunks = [self.ordered[k:k + DIMS_CHUNK] for k in range(0, len(self.ordered), DIMS_CHUNK)]
+            parts = (self.pool.map(_worker_dims_of, chunks) if self.pool is not None and len(chunks) > 1
+                     else (motion_dims(sy, ch) for ch in chunks))
+            pairs = list(parts)
+            a, a_bar = np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
         self.dims = {c: (int(a[k]), int(a_bar[k])) for k, c in enumerate(self.ordered)}
         moving: list[str] = []
         for c in self.ordered:
@@ -246,22 +271,25 @@ class _Enumeration:
         if cert is not None:
             self._share(cert)
 
-    def _share(self, cert: MemberCertificate) -> None:
+    def _share(self, cert: MemberCertificate, queue: bool = True) -> None:
         """Decide the undecided combinations of the certificate's family that it passes for, and
-        queue its motion for the force LPs of the others below its combination (:meth:`_resolve`)."""
+        (``queue``: for the member of an own search) queue its motion for the force LPs of the
+        others below its combination, which it is a motion of."""
         sy = self.system
-        family = [c for c in cert.family(sy) if c in self.pending and c not in self.results]
-        if family:
-            for c, good in zip(family, cert.check(self.kin, family), strict=True):
+        rows = [c for c in cert.family(sy) if c in self.pending and c not in self.results]
+        if rows:
+            for c, good in zip(rows, cert.check(self.kin, rows), strict=True):
                 if good:
                     self._feasible(c, cert.motion)
+        if not queue:
+            return
         for c in cert.below():
             if c in self.pending and c not in self.results:
                 motions = self.queue.setdefault(c, [])
                 if len(motions) < MOTIONS_PER_ROW:
                     motions.append(cert.motion)
 
-    def _feasible(self, c: str, motion: Array) -> bool:
+    def _feasible(self, c: str, motion: Array) -> None:
         """Record ``c`` as feasible with the member motion ``motion`` (already certified for it);
         its DAFC dimension and exactness follow after the loop (:meth:`_finish_shared`)."""
         sy = self.system
@@ -271,7 +299,6 @@ class _Enumeration:
         self.shared.append(c)
         self.stats.dafc_shared += 1
         self.queue.pop(c, None)
-        return True
 
     def _finish_shared(self, pool: ProcessPoolExecutor | None, workers: int = 1) -> None:
         """The DAFC dimension and exactness of the rows decided by a stronger row's member
@@ -313,40 +340,36 @@ class _Enumeration:
         levels: dict[int, list[str]] = {}
         for c in self.dafc_rows:
             levels.setdefault(sum(CLASS[x] for x in c), []).append(c)
-        pool = None
-        if workers > 1 and len(self.dafc_rows) > 1:
-            pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"), initializer=_worker_init,
-                                       initargs=(self.system,))
-        try:
-            for level in sorted(levels, reverse=True):
-                rows = levels[level]
-                while True:  # the queued motions, first ones first
-                    todo = [c for c in rows if c not in self.results and self.queue.get(c)]
-                    if not todo:
-                        break
-                    batches = [[(c, self.queue[c][0]) for c in todo[k:k + BATCH]] for k in range(0, len(todo), BATCH)]
-                    outs = (pool.map(_worker_batch, batches) if pool is not None else
-                            (members_at(self.kin, b) for b in batches))
-                    for pairs, good in zip(batches, outs, strict=True):
-                        self.stats.dafc_lps += len(pairs)
-                        self.stats.dafc_batched += len(pairs)
-                        for (c, motion), ok in zip(pairs, good, strict=True):
-                            if ok:
-                                self._feasible(c, motion)
-                            else:
-                                self.queue[c] = self.queue[c][1:]
-                todo = [c for c in rows if c not in self.results]
-                found = (pool.map(_worker_search, todo, chunksize=max(1, min(8, len(todo) // (8 * workers))))
-                         if pool is not None else (_own_search(self.system, c) for c in todo))
-                for c, out in zip(todo, found, strict=True):
-                    self._commit(c, *out)
-                self._tick()
-                if limit is not None and self._reached(limit, rows[-1]):
+        pool = self.pool
+        for level in sorted(levels, reverse=True):
+            rows = levels[level]
+            while True:  # the queued motions, first ones first
+                todo = [c for c in rows if c not in self.results and self.queue.get(c)]
+                if not todo:
                     break
-            self._finish_shared(pool, workers)
-        finally:
-            if pool is not None:
-                pool.shutdown()
+                batches = [[(c, self.queue[c][0]) for c in todo[k:k + BATCH]] for k in range(0, len(todo), BATCH)]
+                outs = (pool.map(_worker_batch, batches) if pool is not None else
+                        (members_at(self.kin, b) for b in batches))
+                for pairs, good in zip(batches, outs, strict=True):
+                    self.stats.dafc_lps += len(pairs)
+                    self.stats.dafc_batched += len(pairs)
+                    for (c, motion), cert in zip(pairs, good, strict=True):
+                        if cert is not None:
+                            self._feasible(c, motion)
+                            self._share(cert, queue=False)  # its motion is queued below already
+                        else:
+                            self.queue[c] = self.queue[c][1:]
+            todo = [c for c in rows if c not in self.results]
+            found = (pool.map(_worker_search, todo, chunksize=max(1, min(8, len(todo) // (8 * workers))))
+                     if pool is not None else (_own_search(self.system, c) for c in todo))
+            for k, (c, out) in enumerate(zip(todo, found, strict=True)):
+                self._commit(c, *out)
+                if k % 64 == 63:
+                    self._tick()
+            self._tick()
+            if limit is not None and self._reached(limit, rows[-1]):
+                break
+        self._finish_shared(pool, workers)
 
     def _reached(self, limit: int, last: str) -> bool:
         """Are ``limit`` rows feasible among the rows up to ``last`` (strongest-first order)?"""
