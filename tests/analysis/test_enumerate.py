@@ -12,8 +12,9 @@ from closure_helpers import EXAMPLES, Array, example_system, sample_combinations
 from independent_dafc import check_member, check_member_planar, contact_jacobians, planar_jacobians
 from scipy.linalg import null_space
 
-from analysis.combination import CombinationParts, CombinationSummary, summarize
+from analysis.combination import CombinationParts, CombinationSummary, summarize, summarize_with_member
 from analysis.contacts import all_combinations
+from analysis.dafc_family import FamilyKinematics, MemberCertificate, members_at
 from analysis.enumerate import enumerate_combinations
 
 
@@ -159,3 +160,31 @@ def test_dafc_has_the_dimension_of_its_allowable_cone(name: str, combination: st
     data = json.loads((EXAMPLES / f"{name}.json").read_text())
     dirs = _member_directions(data, combination, row.example_motion, 3 * row.a_bar, seed=9)
     assert np.linalg.matrix_rank(dirs, tol=1e-7) == row.a_bar
+
+
+@pytest.mark.parametrize(("name", "source"), [("planar_disk_envelope", "FSFSS"), ("sphere_four_finger_palm", "SFSFS"),
+                                              ("sphere_four_finger_palm", "FSFSS")])
+def test_batched_force_lps_agree_with_each_combinations_oracle(name: str, source: str) -> None:
+    """The member motion of one combination is a motion of every combination that lets some of
+    its contacts go; the force LPs of (22) of all of them at that motion, solved as one
+    block-diagonal LP (members_at), give each one's own oracle answer at that motion, and each
+    certificate passes the family re-check for its own combination."""
+    system = example_system(name)
+    parts = CombinationParts.build(system, source)
+    _, member = summarize_with_member(parts, stationary_known=True, realisable=False)
+    assert member is not None and member.zeta_c is not None
+    cert = MemberCertificate.of(parts, member)
+    assert cert is not None
+    rows = list(cert.below())
+    kin = FamilyKinematics(system)
+    found = members_at(kin, [(c, cert.motion) for c in rows])
+    both = 0
+    for c, got in zip(rows, found, strict=True):
+        p = CombinationParts.build(system, c)
+        zeta, *_ = np.linalg.lstsq(p.ms.Phi_full, cert.motion, rcond=None)
+        t = p.oracle().test(cert.motion[system.M:], zeta_r=zeta[p.ms.a_bar:], screen=False)
+        assert (got is not None) == t.member, (c, t.reason)
+        if got is not None:
+            both += 1
+            assert got.check(kin, list(got.family(system))).all() if list(got.family(system)) else True
+    assert both > 0 and both < len(rows)  # members and non-members among them
