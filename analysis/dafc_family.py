@@ -347,6 +347,8 @@ def slip_depends_on_redundancy(system: GraspSystem, combination: str) -> bool:
     return bool(np.abs(J_s @ Z).max() > 1e-9)
 
 
+#: Weight of the object-motion rows in the least squares of :func:`probe_motions`.
+WEIGHT = 1e3
 #: Penalty, per unit of the force scale, on the slack of the passive equalities in
 #: :func:`members_at` (each problem stays feasible; a point with slack decides nothing).
 ELASTIC = 1e4
@@ -505,3 +507,78 @@ def lam_normal(lam: Array, Fm: Array, j: int) -> float:
     """The normal force (units of the unknowns) of the S/N-point ``j``: its one unknown's weight."""
     k = int(np.flatnonzero(np.any(Fm[:, j] != 0.0, axis=1))[0])
     return float(lam[k])
+
+
+def probe_motions(kin: FamilyKinematics, combinations: list[str]) -> list[list[Array]]:
+    """A few candidate DAFC motions of each combination, computed in batches without an LP, for
+    :func:`members_at` to try before the combination's own search: for the object directions
+    ``-+ w_ex`` (lifted, dropped) and ``+-`` each of (up to) three axes of its object motions,
+    projected on them, the motion of its motion space ``null(A_c)`` with that object motion that
+    moves every D-point away at unit normal speed and (first) slides every S-point against its
+    object point's tangential velocity, so that kinetic friction drags the object along (least
+    squares), kept when it penetrates no D-point and slides every S-point. Any motion will do:
+    :func:`members_at` certifies or decides nothing."""
+    sy = kin.system
+    L, d, M, D = sy.L, sy.d, sy.M, sy.D
+    n = M + D
+    if not combinations:
+        return []
+    code = {"F": 0, "S": 1, "N": 1, "D": 2}
+    letters = np.array([[code[s] for s in c] for c in combinations], dtype=np.intp)  # (B, L)
+    blocks = np.zeros((L, 3, d, n))
+    blocks[:, 0] = kin.A
+    blocks[:, 1, 0] = kin.normal_rows
+    mats = blocks[np.arange(L)[None, :], letters].reshape(len(combinations), L * d, n)
+    _, s1, Vt = np.linalg.svd(mats, full_matrices=True)  # (B, n, n)
+    rank = np.sum(s1 > RANK_RTOL * np.maximum(1.0, s1[:, :1]), axis=1)
+    w = sy.w_ex / max(float(np.linalg.norm(sy.w_ex)), 1e-300)
+    out: list[list[Array]] = []
+    for b, c in enumerate(combinations):
+        Lam = Vt[b, rank[b]:, :].T  # (n, a)
+        found: list[Array] = []
+        if Lam.shape[1] == 0:
+            out.append(found)
+            continue
+        d_idx = [i for i, s in enumerate(c) if s == "D"]
+        s_idx = [i for i, s in enumerate(c) if s == "S"]
+        Rd = kin.normal_rows[d_idx] @ Lam if d_idx else np.zeros((0, Lam.shape[1]))  # (#D, a)
+        obj = Lam[M:]  # (D, a)
+        U, sv, _ = np.linalg.svd(obj, full_matrices=False)
+        basis = U[:, sv > RANK_RTOL * max(1.0, float(sv[0]) if sv.size else 0.0)]  # (D, a_bar)
+        targets = [-w, w] + [sign * basis[:, k] for k in range(min(basis.shape[1], 3)) for sign in (1.0, -1.0)]
+        live = np.linalg.norm(Rd, axis=1) > 1e3 * NULL_ROW_TOL if Rd.size else np.zeros(0, dtype=bool)
+        for t in targets:
+            dr = basis @ (basis.T @ t)
+            nd = float(np.linalg.norm(dr))
+            if nd < 1e-9:
+                continue
+            dr = dr / nd
+            # the S-points' slips against their object points' tangential velocity, so that kinetic
+            # friction drags the object along (as the oracle's friction-aligned redundancy)
+            S_rows = [-kin.A[i] @ Lam for i in s_idx]  # slip = -A_i v
+            S_goal = []
+            for i in s_idx:
+                vo = sy.G_blocks[i].T @ dr
+                vt = vo - (vo @ sy.normals[i]) * sy.normals[i]
+                S_goal.append(-vt / max(float(np.linalg.norm(vt)), 1e-9))
+            variants = [True, False] if s_idx else [False]
+            for aligned in variants:
+                A = [WEIGHT * obj, Rd[live]]
+                rhs = [WEIGHT * dr, -np.ones(int(live.sum()))]
+                if aligned:
+                    A += S_rows
+                    rhs += S_goal
+                y = np.linalg.lstsq(np.vstack(A), np.concatenate(rhs), rcond=RANK_RTOL)[0]
+                v = Lam @ y
+                v = v - Lam @ np.linalg.lstsq(obj, v[M:] - dr, rcond=RANK_RTOL)[0]  # object part exactly dr
+                if float(np.linalg.norm(v[M:] - dr)) > 1e-9:
+                    continue
+                rel = kin.A @ v  # (L, d)
+                size = float(np.linalg.norm(v))
+                if any(float(kin.normal_rows[i] @ v) > ALLOW_TOL for i in d_idx):
+                    continue
+                if any(float(np.linalg.norm(rel[i])) <= SLIP_TOL * size for i in s_idx):
+                    continue
+                found.append(v)
+        out.append(found)
+    return out

@@ -1,17 +1,20 @@
 """Enumeration of all contact-state combinations with pruning.
 
-A combination is feasible when the stationary grasp (18) exists and DAFC (22) is non-empty.
-Pruning, all exact:
+A combination is feasible when the stationary grasp (18) exists and DAFC (22) is non-empty. The
+combinations are decided in stages, each over all of them at once, strongest first (F = 2, S/N = 1,
+D = 0 summed), every answer as exact as that of the combination alone:
 
-* motion space: ``a~ = 0`` (the object cannot move) needs only an SVD;
-* stationary grasp monotonicity: the force set of a contact shrinks F -> S/N -> D (cone ->
-  normal only -> nothing), so (18) infeasible for a combination is infeasible for every
-  combination that downgrades any of its contacts, and a solution whose forces fit a weaker
-  pattern (zero force, or normal-only, by the absolute thresholds of :mod:`analysis.scales`)
-  is a candidate certificate for every combination at least as strong, used only once it is
-  re-checked against that combination's eq. (18) in newtons;
-* optionally the kinematic contact modes (:mod:`analysis.modes`): a combination no object
-  twist realises (F stick, S slide, D not penetrating) is skipped.
+* motion space (:func:`analysis.motion.motion_dims`, batched SVDs): ``a~ = 0``, the object cannot
+  move;
+* optionally the kinematic contact modes (:mod:`analysis.modes`): a combination no object twist
+  realises (F stick, S slide, D not penetrating) is skipped;
+* stationary grasp (:mod:`analysis.stationary_table`): monotone in the force classes, one LP for
+  each combination no stronger infeasible one and no re-checked solution of a weaker pattern
+  decides;
+* DAFC (:mod:`analysis.dafc_family`): a member of one combination, re-checked, decides the
+  combinations that let go of contacts it puts no force on, and its motion is tried, by force LPs
+  batched into one HiGHS call, on every combination that lets go of contacts it keeps; the rest get
+  their own search (:func:`analysis.dafc.dafc_nonempty`). Level by level, in worker processes.
 """
 
 from __future__ import annotations
@@ -31,7 +34,13 @@ from analysis._types import Array
 from analysis.combination import CombinationParts, CombinationSummary, no_grasp_reason, summarize_with_member
 from analysis.contacts import GraspSystem
 from analysis.dafc import allowable_cone
-from analysis.dafc_family import FamilyKinematics, MemberCertificate, members_at, slip_depends_on_redundancy
+from analysis.dafc_family import (
+    FamilyKinematics,
+    MemberCertificate,
+    members_at,
+    probe_motions,
+    slip_depends_on_redundancy,
+)
 from analysis.exceptions import CombinationError
 from analysis.motion import motion_dims
 from analysis.stationary_table import CLASS, stationary_verdicts
@@ -73,7 +82,8 @@ class EnumerationStats:
     stopped_at_limit: bool = False  # the enumeration stopped after ``limit`` feasible combinations
     dafc_searched: int = 0  # combinations whose DAFC was decided by their own search
     dafc_shared: int = 0  # combinations decided by a re-checked member (motion) of a stronger one
-    dafc_batched: int = 0  # of the DAFC LPs, force LPs at a stronger one's member motion (one HiGHS call a batch)
+    dafc_batched: int = 0  # of the DAFC LPs, force LPs at a given motion (one HiGHS call a batch)
+    dafc_probed: int = 0  # of the shared rows, decided at one of their own canonical probe motions
 
     @property
     def lps(self) -> int:
@@ -140,6 +150,29 @@ def _worker_dims_of(combinations: list[str]) -> tuple[NDArray[np.int_], NDArray[
     system = _WORKER["system"]
     assert isinstance(system, GraspSystem)
     return motion_dims(system, combinations)
+
+
+def _probe(kin: FamilyKinematics, rows: list[str]) -> tuple[list[MemberCertificate | None], int]:
+    """The first member among the probe motions of each row (batched force LPs, round by round),
+    and the LPs solved."""
+    motions = probe_motions(kin, rows)
+    found: list[MemberCertificate | None] = [None] * len(rows)
+    tried = 0
+    for r in range(max((len(m) for m in motions), default=0)):
+        idx = [k for k, m in enumerate(motions) if found[k] is None and len(m) > r]
+        if not idx:
+            break
+        certs = members_at(kin, [(rows[k], motions[k][r]) for k in idx])
+        tried += len(idx)
+        for k, cert in zip(idx, certs, strict=True):
+            found[k] = cert
+    return found, tried
+
+
+def _worker_probe(rows: list[str]) -> tuple[list[MemberCertificate | None], int]:
+    kin = _WORKER["kin"]
+    assert isinstance(kin, FamilyKinematics)
+    return _probe(kin, rows)
 
 
 def _worker_batch(pairs: list[tuple[str, Array]]) -> list[MemberCertificate | None]:
@@ -334,7 +367,6 @@ class _Enumeration:
         strongest-first order), then their own searches; results are committed in that order, so
         the table does not depend on the number of workers."""
         self.pending = set(self.dafc_rows)
-        self.pos = {c: k for k, c in enumerate(self.dafc_rows)}
         self.queue: dict[str, list[Array]] = {}  # queued member motions of stronger combinations
         self.shared: list[str] = []  # decided by a stronger combination's member
         levels: dict[int, list[str]] = {}
@@ -360,6 +392,8 @@ class _Enumeration:
                         else:
                             self.queue[c] = self.queue[c][1:]
             todo = [c for c in rows if c not in self.results]
+            self._probe(todo, pool)
+            todo = [c for c in todo if c not in self.results]
             found = (pool.map(_worker_search, todo, chunksize=max(1, min(8, len(todo) // (8 * workers))))
                      if pool is not None else (_own_search(self.system, c) for c in todo))
             for k, (c, out) in enumerate(zip(todo, found, strict=True)):
@@ -370,6 +404,20 @@ class _Enumeration:
             if limit is not None and self._reached(limit, rows[-1]):
                 break
         self._finish_shared(pool, workers)
+
+    def _probe(self, rows: list[str], pool: ProcessPoolExecutor | None) -> None:
+        """Canonical motions of ``rows`` (:func:`probe_motions`) tried by batched force LPs before
+        their own searches; a member's certificate is shared as an own search's is."""
+        chunks = [rows[k:k + BATCH] for k in range(0, len(rows), BATCH)]
+        outs = (pool.map(_worker_probe, chunks) if pool is not None else (_probe(self.kin, ch) for ch in chunks))
+        for chunk, (certs, tried) in zip(chunks, outs, strict=True):
+            self.stats.dafc_lps += tried
+            self.stats.dafc_batched += tried
+            for c, cert in zip(chunk, certs, strict=True):
+                if cert is not None and c not in self.results:
+                    self._feasible(c, cert.motion)
+                    self.stats.dafc_probed += 1
+                    self._share(cert)
 
     def _reached(self, limit: int, last: str) -> bool:
         """Are ``limit`` rows feasible among the rows up to ``last`` (strongest-first order)?"""

@@ -203,8 +203,8 @@ def main() -> None:
           f"ctp modes (new process, imports included): {cli:.2f} s wall  [target < 10 s]")
     n, w, c, lps, f = twelve_contact_sample(300 if args.quick else 1500)
     print(f"sphere_wrap_three_link enumeration of {n} seeded combinations, one core: {w:.1f} s wall, {c:.1f} s CPU, "
-          f"{lps} LPs ({f} feasible); x 531,441 / {n}: {c * 531441 / n:.0f} s CPU for the full list  "
-          "[target < 60 s]")
+          f"{lps} LPs ({f} feasible); x 531,441 / {n}: {c * 531441 / n:.0f} s CPU for the full list (an upper bound: "
+          "a sparse sample shares few DAFC members; --twelve runs the full list)  [target < 60 s]")
     if not args.quick:
         cores = os.cpu_count() or 1
         t, f, n, c, lps = time_enum("sphere_four_finger_wrap", workers=cores)
