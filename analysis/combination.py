@@ -22,6 +22,7 @@ from analysis.dafc import (
     DAFCOracle,
     DAFCSet,
     DirectionTest,
+    allowable_cone,
     dafc_nonempty,
     dafc_set,
     default_samples,
@@ -75,6 +76,9 @@ class CombinationSummary:
     dim_dpfc: int  # p = rank(G_c Gamma): dimension of the span of DPFC directions
     exact: bool
     example_direction: Array | None  # (D,) a member of DAFC
+    #: (M + D,) [dq; dr] of a motion realising the example direction that is a member (its forces
+    #: do positive work): the certificate behind the verdict, for re-checks (not in to_json)
+    example_motion: Array | None = None
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -106,19 +110,29 @@ def summarize(parts: CombinationParts, stationary_known: bool | None = None,
     LP, :func:`analysis.stationary.stationary_violation`), which marks degenerate verdicts.
     ``oracle``: the DAFC oracle of ``parts`` to use (a fresh one by default); the caller may read
     its ``lp_count`` afterwards."""
+    return summarize_with_member(parts, stationary_known, violation, oracle)[0]
+
+
+def summarize_with_member(parts: CombinationParts, stationary_known: bool | None = None,
+                          violation: float | None = None, oracle: DAFCOracle | None = None,
+                          realisable: bool = True) -> tuple[CombinationSummary, DirectionTest | None]:
+    """:func:`summarize` and the DAFC member behind a feasible verdict (its motion and forces,
+    for re-use by the enumeration: :mod:`analysis.dafc_family`). ``realisable=False``: the example
+    direction is the first member found, not the first whose torque set is non-empty (the
+    verdict, the dimension and the exactness do not depend on it; :func:`dafc_nonempty`)."""
     sy, sel, ms, st, fs = parts.system, parts.sel, parts.ms, parts.st, parts.fs
     c = sel.combination
     p = st.p
     if ms.a_bar == 0:
-        return CombinationSummary(c, False, "object cannot move (a~ = 0)", ms.a, 0, 0, p, True, None)
+        return CombinationSummary(c, False, "object cannot move (a~ = 0)", ms.a, 0, 0, p, True, None), None
     if stationary_known is None:
         stationary_known = min_total_normal(sy, st, fs) is not None
     if not stationary_known:
         if violation is None:
             violation = stationary_violation(sy, st, fs)
-        return CombinationSummary(c, False, no_grasp_reason(violation), ms.a, ms.a_bar, 0, p, True, None)
+        return CombinationSummary(c, False, no_grasp_reason(violation), ms.a, ms.a_bar, 0, p, True, None), None
     oracle = parts.oracle() if oracle is None else oracle
-    best, dim, exact = dafc_nonempty(oracle)
+    best, dim, exact = dafc_nonempty(oracle, realisable=realisable)
     if best is None:
         reason = "DAFC is empty"
         if oracle.undecided:
@@ -127,8 +141,9 @@ def summarize(parts: CombinationParts, stationary_known: bool | None = None,
         if oracle.sector_open:
             reason += f"; not proven: the slip-sector search left {oracle.sector_open} boxes open"
             exact = False
-        return CombinationSummary(c, False, reason, ms.a, ms.a_bar, 0, p, exact, None)
-    return CombinationSummary(c, True, "feasible", ms.a, ms.a_bar, dim, p, exact, best.direction)
+        return CombinationSummary(c, False, reason, ms.a, ms.a_bar, 0, p, exact, None), None
+    motion = ms.Phi_full @ best.zeta_c if best.zeta_c is not None else None
+    return CombinationSummary(c, True, "feasible", ms.a, ms.a_bar, dim, p, exact, best.direction, motion), best
 
 
 @dataclass(frozen=True)
@@ -343,11 +358,12 @@ def analyze_combination(
         found = [t for t in (dset.tests if dset is not None else ()) if t.member]
         if dtest is not None and dtest.member:
             found.append(dtest)
-        if found:
-            members = np.array([t.u for t in found])
+        if found:  # DAFC then has the dimension of A_r (dafc_nonempty)
+            cone = allowable_cone(ms).all_directions()
+            zc = found[0].zeta_c
             summary = CombinationSummary(summary.combination, True, "feasible", ms.a, ms.a_bar,
-                                         int(np.linalg.matrix_rank(members, tol=1e-6)), st.p, False,
-                                         found[0].direction)
+                                         int(np.linalg.matrix_rank(cone, tol=1e-9)), st.p, False,
+                                         found[0].direction, None if zc is None else ms.Phi_full @ zc)
             notes.append("DAFC found non-empty by a direction the table's search did not test")
     dp = dpfc(st, fs, grasp) if grasp is not None else None
     rg = regrasp_cone(sy, sel, ms, st, fs) if grasp is not None else None

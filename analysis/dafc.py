@@ -1268,15 +1268,15 @@ def _dedupe(U: Array) -> Array:
 
 
 def _prefer_realisable(oracle: DAFCOracle, dirs: list[Array], screen: bool = True, quick: bool = False,
-                       witness: bool = True) -> DirectionTest | None:
+                       witness: bool = True, prefer: bool = True) -> DirectionTest | None:
     """Test the coordinates ``dirs`` in order (options of :meth:`DAFCOracle.test`); the first
     member whose torque set (32) is non-empty (:meth:`DAFCOracle.realisable`), else the first
-    member, else None."""
+    member, else None. ``prefer=False``: the first member."""
     first: DirectionTest | None = None
     for u in dirs:
         t = oracle.test(oracle.ms.Lambda_r_t @ u, screen=screen, quick=quick, witness=witness)
         if t.member:
-            if oracle.realisable(t):
+            if not prefer or oracle.realisable(t):
                 return t
             first = first or t
     return first
@@ -1310,7 +1310,8 @@ def _redundancy_draws(oracle: DAFCOracle, dirs: list[Array]) -> DirectionTest | 
     return None
 
 
-def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[DirectionTest | None, int, bool]:
+def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16, realisable: bool = True
+                  ) -> tuple[DirectionTest | None, int, bool]:
     """Decide whether DAFC is empty; return (a member or None, dim DAFC, exact).
 
     Without S-points: test the generators of the allowable cone; exact (see :class:`DAFCSet`).
@@ -1318,21 +1319,23 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     (friction-aligned and least-L1 redundancy), stopping at the first member; (1) failing that,
     the relaxation with free friction directions is tested on the generators, which proves
     emptiness exactly when none does positive work; (2) otherwise the samples and then the
-    generators are tested with the full redundancy search. A member in the relative interior of
-    ``A_r`` has, for non-degenerate data, a neighbourhood of members in ``A_r`` (the slips and the
-    LP data vary continuously), so DAFC then has the dimension of ``A_r``; a member found only on
-    the boundary gives the rank of the members. (2b) Failing those, the branch and bound over the
+    generators are tested with the full redundancy search. A member (its work above the threshold,
+    its S-points sliding) has, for non-degenerate data, a neighbourhood of members in ``A_r`` (the
+    slips and the LP data vary continuously with the motion), so DAFC then has the dimension of
+    ``A_r``, wherever in ``A_r`` the member was found. (2b) Failing those, the branch and bound over the
     S-points' slip directions (:func:`slip_sector_search`) either finds a member, or closes every
     box, which proves emptiness (``exact = True``); (2c) where it leaves boxes open (3-D sectors at
     the resolution or past the budget; ``oracle.sector_open`` counts them and the table's reason
     says so), seeded redundancies and then (3) the report's sample are tried. Members are marked
-    ``exact = False`` (the dimension is a local estimate).
+    ``exact = False`` (the dimension rests on the non-degeneracy above).
 
     The returned member (the combination's example direction) is, within each stage, the first
     one whose torque set (32) is non-empty (:meth:`DAFCOracle.realisable`), else the first
     member: the samples live in the coordinates of ``Lambda~_r``, whose column signs are LAPACK's
     choice, so "the first member" alone may be a direction with no W_3-admissible forces on one
-    machine and a realisable one on another.
+    machine and a realisable one on another. ``realisable=False`` (the enumeration's table, whose
+    verdict and dimension do not depend on it) returns the first member of each stage, without
+    the torque-set LPs.
     """
     ms = oracle.ms
     if ms.a_bar == 0:
@@ -1346,7 +1349,7 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     if not oracle.sel.s_index or (oracle.exact and ms.a_bar == 1):
         # without S-points: A_r minus a convex cone, decided on the generators; with a_bar = 1 the
         # only directions are the (at most two) generators, each decided by the exact oracle
-        t = _prefer_realisable(oracle, generators, witness=False)
+        t = _prefer_realisable(oracle, generators, witness=False, prefer=realisable)
         return (t, cone_dim, True) if t is not None else (None, 0, True)
     # (0) the centroid of the cone (the likeliest member), then seeded interior samples
     rng = np.random.default_rng(1)
@@ -1358,7 +1361,7 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
         v = rng.random(len(dirs)) @ dirs
         if np.linalg.norm(v) > 1e-9:
             interior.append(v / np.linalg.norm(v))
-    t = _prefer_realisable(oracle, interior, screen=False, quick=True, witness=False)
+    t = _prefer_realisable(oracle, interior, screen=False, quick=True, witness=False, prefer=realisable)
     if t is not None:
         return t, cone_dim, False
     # (1) relaxation: exact emptiness certificate
@@ -1366,20 +1369,19 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
     if not positive:
         return None, 0, True
     # (2) the interior samples again with the full redundancy search, then the generators
-    t = _prefer_realisable(oracle, interior, screen=False, witness=False)
+    t = _prefer_realisable(oracle, interior, screen=False, witness=False, prefer=realisable)
     if t is not None:
         return t, cone_dim, False
-    members: list[Array] = []
     best: DirectionTest | None = None
     best_ok = False
-    for u in positive:
+    for u in positive:  # the first member whose torque set is non-empty, else the first member
         t = oracle.test(ms.Lambda_r_t @ u, screen=False, witness=False)
         if t.member:
-            members.append(t.u)
-            if not best_ok:
-                ok = oracle.realisable(t)
-                if best is None or ok:
-                    best, best_ok = t, ok
+            ok = oracle.realisable(t) if realisable else True
+            if best is None or ok:
+                best, best_ok = t, ok
+            if best_ok:
+                break
     if best is None:
         # (2b) the branch and bound over the S-points' slip directions on the whole allowable
         # cone (:func:`slip_sector_search`): a member, or a proof of emptiness when it closes
@@ -1387,7 +1389,7 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
         found = slip_sector_search(oracle)
         oracle.sector_boxes += found.boxes
         if found.test is not None:
-            return found.test, max(1, found.dim), False
+            return found.test, cone_dim, False
         if found.decided:
             return None, 0, True
         oracle.sector_open += found.open_boxes
@@ -1396,19 +1398,18 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16) -> tuple[Directio
         t = _redundancy_draws(oracle, positive + ([centroid / np.linalg.norm(centroid)]
                                                   if np.linalg.norm(centroid) > 1e-9 else []))
         if t is not None:
-            return t, 1, False
+            return t, cone_dim, False
     if best is None:
         # (3) the directions the full report samples (:func:`dafc_set`), so that a combination the
         # table calls empty never shows members in its own report
         for u in sample_directions(ms, default_samples(ms.a_bar)):
             t = oracle.test(ms.Lambda_r_t @ u, witness=False)
             if t.member:
-                members.append(t.u)
                 best = t
                 break
     if best is None:
         return None, 0, False
-    return best, int(np.linalg.matrix_rank(np.array(members), tol=1e-6)), False
+    return best, cone_dim, False
 
 
 def default_samples(a_bar: int) -> int:

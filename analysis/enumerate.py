@@ -1,17 +1,20 @@
 """Enumeration of all contact-state combinations with pruning.
 
-A combination is feasible when the stationary grasp (18) exists and DAFC (22) is non-empty.
-Pruning, all exact:
+A combination is feasible when the stationary grasp (18) exists and DAFC (22) is non-empty. The
+combinations are decided in stages, each over all of them at once, strongest first (F = 2, S/N = 1,
+D = 0 summed), every answer as exact as that of the combination alone:
 
-* motion space: ``a~ = 0`` (the object cannot move) needs only an SVD;
-* stationary grasp monotonicity: the force set of a contact shrinks F -> S/N -> D (cone ->
-  normal only -> nothing), so (18) infeasible for a combination is infeasible for every
-  combination that downgrades any of its contacts, and a solution whose forces fit a weaker
-  pattern (zero force, or normal-only, by the absolute thresholds of :mod:`analysis.scales`)
-  is a candidate certificate for every combination at least as strong, used only once it is
-  re-checked against that combination's eq. (18) in newtons;
-* optionally the kinematic contact modes (:mod:`analysis.modes`): a combination no object
-  twist realises (F stick, S slide, D not penetrating) is skipped.
+* motion space (:func:`analysis.motion.motion_dims`, batched SVDs): ``a~ = 0``, the object cannot
+  move;
+* optionally the kinematic contact modes (:mod:`analysis.modes`): a combination no object twist
+  realises (F stick, S slide, D not penetrating) is skipped;
+* stationary grasp (:mod:`analysis.stationary_table`): monotone in the force classes, one LP for
+  each combination no stronger infeasible one and no re-checked solution of a weaker pattern
+  decides;
+* DAFC (:mod:`analysis.dafc_family`): a member of one combination, re-checked, decides the
+  combinations that let go of contacts it puts no force on, and its motion is tried, by force LPs
+  batched into one HiGHS call, on every combination that lets go of contacts it keeps; the rest get
+  their own search (:func:`analysis.dafc.dafc_nonempty`). Level by level, in worker processes.
 """
 
 from __future__ import annotations
@@ -25,16 +28,22 @@ from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import NDArray
 
 from analysis._types import Array
-from analysis.combination import CombinationParts, CombinationSummary, summarize
+from analysis.combination import CombinationParts, CombinationSummary, no_grasp_reason, summarize_with_member
 from analysis.contacts import GraspSystem
+from analysis.dafc import allowable_cone
+from analysis.dafc_family import (
+    FamilyKinematics,
+    MemberCertificate,
+    members_at,
+    probe_motions,
+    slip_depends_on_redundancy,
+)
 from analysis.exceptions import CombinationError
-from analysis.scales import REUSE_TOL
-from analysis.stationary import DEGENERATE_TOL, certifies, min_total_normal, stationary_violation
-
-_CLASS = {"F": 2, "S": 1, "N": 1, "D": 0}
-
+from analysis.motion import motion_dims
+from analysis.stationary_table import CLASS, stationary_verdicts
 
 _OPS: dict[str, Callable[[int, int], bool]] = {
     ">=": lambda a, b: a >= b, "<=": lambda a, b: a <= b, "==": lambda a, b: a == b,
@@ -71,117 +80,111 @@ class EnumerationStats:
     stationary_lps: int = 0
     dafc_lps: int = 0  # LPs of the DAFC oracles (membership, redundancy, relaxation, realisability)
     stopped_at_limit: bool = False  # the enumeration stopped after ``limit`` feasible combinations
+    dafc_searched: int = 0  # combinations whose DAFC was decided by their own search
+    dafc_shared: int = 0  # combinations decided by a re-checked member (motion) of a stronger one
+    dafc_batched: int = 0  # of the DAFC LPs, force LPs at a given motion (one HiGHS call a batch)
+    dafc_probed: int = 0  # of the shared rows, decided at one of their own canonical probe motions
 
-
-class _StationaryCache:
-    """Monotone memory of stationary-grasp feasibility over force classes (F=2, S/N=1, D=0).
-
-    An infeasible combination makes every combination it dominates infeasible (their force sets
-    are subsets). A feasible one leaves its certificate: the contact forces ``(L, d)`` in newtons
-    and the weakest class each contact needs (zero force -> 0, normal only -> 1, else 2, with the
-    absolute thresholds of :mod:`analysis.scales`). A cached certificate answers for another
-    combination only after it is re-checked against that combination's eq. (18) in physical units
-    (:func:`analysis.stationary.certifies`).
-    """
-
-    def __init__(self, L: int) -> None:
-        self.infeasible = np.zeros((0, L), dtype=np.int8)  # (k, L)
-        self.witnesses = np.zeros((0, L), dtype=np.int8)  # (k, L)
-        self.forces: list[Array] = []  # per witness, (L, d) contact forces [N]
-        self.violations = np.zeros(0)  # per infeasible entry, its least friction violation (inf: none)
-
-    def candidates(self, cls: tuple[int, ...]) -> list[Array]:
-        """Cached certificates whose classes fit the combination with classes ``cls``."""
-        if not self.witnesses.shape[0]:
-            return []
-        c = np.asarray(cls, dtype=np.int8)
-        return [self.forces[k] for k in np.flatnonzero(np.all(c >= self.witnesses, axis=1))[:4]]
-
-    def infeasible_for(self, cls: tuple[int, ...]) -> tuple[bool, float | None]:
-        """Is (18) infeasible for ``cls`` by a cached stronger combination, and the largest friction
-        violation among those (a lower bound of its own: a weaker force set needs at least as much)."""
-        if not self.infeasible.shape[0]:
-            return False, None
-        c = np.asarray(cls, dtype=np.int8)
-        hit = np.all(c <= self.infeasible, axis=1)
-        if not np.any(hit):
-            return False, None
-        return True, float(np.max(self.violations[hit]))
-
-    def add_infeasible(self, cls: tuple[int, ...], violation: float | None) -> None:
-        self.infeasible = np.vstack([self.infeasible, np.asarray(cls, dtype=np.int8)])
-        self.violations = np.r_[self.violations, np.inf if violation is None else violation]
-
-    def add_witness(self, parts: CombinationParts, f_c: Array) -> None:
-        forces = _contact_forces(parts, f_c)
-        self.witnesses = np.vstack([self.witnesses, np.asarray(_witness_classes(parts, forces), dtype=np.int8)])
-        self.forces.append(forces)
-
-
-def _contact_forces(parts: CombinationParts, f_c: Array) -> Array:
-    """The force on the object at every contact, ``(L, d)`` world frame [N] (zero at D-points)."""
-    sy, sel = parts.system, parts.sel
-    out = np.zeros((sy.L, sy.d))
-    for i, s in enumerate(sel.combination):
-        f = f_c[sel.c_slices[i]]
-        if s == "F":
-            out[i] = f
-        elif s in "SN":
-            out[i] = float(f[0]) * sy.normals[i]
-    return out
-
-
-def _selected_forces(parts: CombinationParts, forces: Array) -> Array:
-    """``f_c`` of the combination of ``parts`` from contact forces ``(L, d)``."""
-    sy, sel = parts.system, parts.sel
-    out = np.zeros(sel.L_c)
-    for i, s in enumerate(sel.combination):
-        sl = sel.c_slices[i]
-        if s == "F":
-            out[sl] = forces[i]
-        elif s in "SN":
-            out[sl] = forces[i] @ sy.normals[i]
-    return out
-
-
-def _witness_classes(parts: CombinationParts, forces: Array) -> tuple[int, ...]:
-    """Weakest force class of each contact that the contact forces ``(L, d)`` still satisfy:
-    0 when the force is at most ``ZERO_FORCE F0``, 1 when its tangential part is, else 2."""
-    sy = parts.system
-    zero = sy.scales.zero_force
-    out = []
-    for i in range(sy.L):
-        f = forces[i]
-        if float(np.linalg.norm(f)) <= zero:
-            out.append(0)
-        elif np.linalg.norm(f - (f @ sy.normals[i]) * sy.normals[i]) > zero:
-            out.append(2)
-        else:
-            out.append(1)
-    return tuple(out)
+    @property
+    def lps(self) -> int:
+        return self.stationary_lps + self.dafc_lps
 
 
 def _order(combos: Iterable[str]) -> list[str]:
-    """Strongest combinations first, so infeasibility propagates downwards."""
-    return sorted(combos, key=lambda c: -sum(_CLASS[s] for s in c))
+    """Strongest combinations first (stable), so infeasibility and members propagate downwards."""
+    return sorted(combos, key=lambda c: -sum(CLASS[s] for s in c))
 
 
 #: Enumerations larger than this are split over worker processes (when ``workers`` > 1).
 PARALLEL_THRESHOLD = 2000
+#: Member motions of stronger combinations tried per combination, and force LPs per HiGHS call.
+MOTIONS_PER_ROW = 2
+BATCH = 256
+#: Combinations per chunk of the batched motion-space dimensions.
+DIMS_CHUNK = 16384
 
 _WORKER: dict[str, object] = {}
 
 
-def _worker_init(system: GraspSystem, admissible: Callable[[str], bool] | None) -> None:
+def _worker_init(system: GraspSystem) -> None:
     _WORKER["system"] = system
-    _WORKER["admissible"] = admissible
+    _WORKER["kin"] = FamilyKinematics(system)
 
 
-def _worker_run(chunk: list[str]) -> tuple[list[CombinationSummary], EnumerationStats]:
+def _shared_dims(system: GraspSystem, kin: FamilyKinematics, rows: list[tuple[str, Array, int]]
+                 ) -> list[tuple[int | None, bool]]:
+    """For each row decided by a stronger row's member ``(combination, member motion, a_bar)``: the
+    dimension of its allowable cone, the table's DAFC dimension for a member (``a_bar`` when a
+    motion that separates every D-point strictly proves the cone full-dimensional,
+    :meth:`FamilyKinematics.separating`, else from cdd's generators as :func:`dafc_nonempty`
+    computes it; None when it has none), and its exactness (as :func:`dafc_nonempty`: no S-point,
+    or ``a_bar = 1`` with slips that do not depend on the redundancy)."""
+    out: list[tuple[int | None, bool]] = []
+    for c, motion, a_bar in rows:
+        dim: int | None = a_bar
+        if kin.separating(c, motion) is None:
+            dirs = allowable_cone(CombinationParts.build(system, c).ms).all_directions()
+            dim = int(np.linalg.matrix_rank(dirs, tol=1e-9)) if dirs.shape[0] else None
+        exact = "S" not in c or (a_bar == 1 and not slip_depends_on_redundancy(system, c))
+        out.append((dim, exact))
+    return out
+
+
+def _worker_dims(rows: list[tuple[str, Array, int]]) -> list[tuple[int | None, bool]]:
+    system, kin = _WORKER["system"], _WORKER["kin"]
+    assert isinstance(system, GraspSystem) and isinstance(kin, FamilyKinematics)
+    return _shared_dims(system, kin, rows)
+
+
+def _own_search(system: GraspSystem, combination: str) -> tuple[CombinationSummary, MemberCertificate | None, int]:
+    """The DAFC search of one combination whose stationary grasp exists: its summary, the
+    certificate of its member (for the family) and the LPs it solved."""
+    parts = CombinationParts.build(system, combination)
+    oracle = parts.oracle()
+    summary, member = summarize_with_member(parts, stationary_known=True, oracle=oracle, realisable=False)
+    cert = MemberCertificate.of(parts, member) if member is not None else None
+    return summary, cert, oracle.lp_count
+
+
+def _worker_dims_of(combinations: list[str]) -> tuple[NDArray[np.int_], NDArray[np.int_]]:
     system = _WORKER["system"]
     assert isinstance(system, GraspSystem)
-    adm = _WORKER["admissible"]
-    return _enumerate_serial(system, chunk, adm if callable(adm) else None, None)
+    return motion_dims(system, combinations)
+
+
+def _probe(kin: FamilyKinematics, rows: list[str]) -> tuple[list[MemberCertificate | None], int]:
+    """The first member among the probe motions of each row (batched force LPs, round by round),
+    and the LPs solved."""
+    motions = probe_motions(kin, rows)
+    found: list[MemberCertificate | None] = [None] * len(rows)
+    tried = 0
+    for r in range(max((len(m) for m in motions), default=0)):
+        idx = [k for k, m in enumerate(motions) if found[k] is None and len(m) > r]
+        if not idx:
+            break
+        certs = members_at(kin, [(rows[k], motions[k][r]) for k in idx])
+        tried += len(idx)
+        for k, cert in zip(idx, certs, strict=True):
+            found[k] = cert
+    return found, tried
+
+
+def _worker_probe(rows: list[str]) -> tuple[list[MemberCertificate | None], int]:
+    kin = _WORKER["kin"]
+    assert isinstance(kin, FamilyKinematics)
+    return _probe(kin, rows)
+
+
+def _worker_batch(pairs: list[tuple[str, Array]]) -> list[MemberCertificate | None]:
+    kin = _WORKER["kin"]
+    assert isinstance(kin, FamilyKinematics)
+    return members_at(kin, pairs)
+
+
+def _worker_search(combination: str) -> tuple[CombinationSummary, MemberCertificate | None, int]:
+    system = _WORKER["system"]
+    assert isinstance(system, GraspSystem)
+    return _own_search(system, combination)
 
 
 def enumerate_combinations(
@@ -196,99 +199,243 @@ def enumerate_combinations(
     """Summaries of every combination (scene order of letters), strongest-first evaluation.
 
     ``admissible`` (e.g. from the contact modes) may veto combinations no motion realises.
-    Results are returned in the canonical product order (F/S/D or N/D per contact).
-    ``workers``: processes for large enumerations (default: all cores above
-    ``PARALLEL_THRESHOLD`` combinations, else 1); each worker keeps its own pruning memory.
+    Results are returned in the canonical product order (F/S/D or N/D per contact), or in the
+    order of ``combinations``.
+
+    The combinations are decided in stages, each over all of them at once: the motion-space
+    dimensions (batched SVDs, :func:`analysis.motion.motion_dims`); the stationary grasps, by
+    monotonicity from few LPs (:mod:`analysis.stationary_table`); then DAFC, strongest first,
+    each combination by its own search (:func:`analysis.dafc.dafc_nonempty`) unless the
+    re-checked member of a stronger combination decides it (:mod:`analysis.dafc_family`).
+    ``workers`` processes (default: all cores above ``PARALLEL_THRESHOLD`` combinations, else 1)
+    run the own searches ahead of the strongest-first order; the results are committed in that
+    order, so the table does not depend on the number of workers.
     ``where`` (:func:`parse_where`) keeps only the combinations it accepts; ``limit`` stops after
-    that many feasible combinations (one process, strongest first) and returns the rows decided so
-    far, with ``stats.stopped_at_limit``.
+    that many feasible combinations (strongest first) and returns the rows decided so far, with
+    ``stats.stopped_at_limit``. ``progress(done, total)`` is called as combinations are decided.
     """
     letters = ["FSD" if m > 0 else "ND" for m in system.mu]
     canonical = ["".join(p) for p in itertools.product(*letters)] if combinations is None else list(combinations)
     if where is not None:
         canonical = [c for c in canonical if where(c)]
-    if limit is not None:
-        if limit < 1:
-            raise CombinationError(("limit",), f"{limit} must be at least 1")
-        workers = 1
+    if limit is not None and limit < 1:
+        raise CombinationError(("limit",), f"{limit} must be at least 1")
     if workers is None:
         workers = (os.cpu_count() or 1) if len(canonical) > PARALLEL_THRESHOLD else 1
-    if workers <= 1:
-        return _enumerate_serial(system, canonical, admissible, progress, limit)
-    ordered = _order(canonical)
-    n_chunks = max(workers * 2, 1)
-    chunks = [ordered[k::n_chunks] for k in range(n_chunks)]  # interleaved: similar strength mix
-    stats = EnumerationStats(combinations=len(canonical))
-    results: dict[str, CombinationSummary] = {}
-    done = 0
-    ctx = mp.get_context("fork")
-    with ProcessPoolExecutor(workers, mp_context=ctx, initializer=_worker_init,
-                             initargs=(system, admissible)) as pool:
-        for summaries, st in pool.map(_worker_run, chunks):
-            for sm in summaries:
-                results[sm.combination] = sm
-            for f in ("pruned_motion", "pruned_stationary", "pruned_modes", "stationary_lps", "dafc_lps"):
-                setattr(stats, f, getattr(stats, f) + getattr(st, f))
-            done += len(summaries)
-            if progress is not None:
-                progress(done, len(canonical))
-    return [results[c] for c in canonical], stats
-
-
-def _enumerate_serial(
-    system: GraspSystem,
-    canonical: list[str],
-    admissible: Callable[[str], bool] | None,
-    progress: Callable[[int, int], None] | None,
-    limit: int | None = None,
-) -> tuple[list[CombinationSummary], EnumerationStats]:
-    stats = EnumerationStats(combinations=len(canonical))
-    feasible = 0
-    cache = _StationaryCache(system.L)
-    results: dict[str, CombinationSummary] = {}
-    ordered = _order(canonical)
-    for k, c in enumerate(ordered):
-        if progress is not None:
-            progress(k, len(ordered))
-        parts = CombinationParts.build(system, c)
-        ms, st = parts.ms, parts.st
-        if ms.a_bar == 0:
-            stats.pruned_motion += 1
-            results[c] = CombinationSummary(c, False, "object cannot move (a~ = 0)", ms.a, 0, 0, st.p, True, None)
-            continue
-        if admissible is not None and not admissible(c):
-            stats.pruned_modes += 1
-            results[c] = CombinationSummary(c, False, "no object motion realises these contact states",
-                                            ms.a, ms.a_bar, 0, st.p, True, None)
-            continue
-        cls = tuple(_CLASS[s] for s in c)
-        pruned, bound = cache.infeasible_for(cls)
-        known: bool | None = False if pruned else None
-        violation: float | None = None
-        if pruned and bound is not None and bound > DEGENERATE_TOL:
-            violation = bound  # not degenerate: its own violation is at least that
-        if known is None and any(certifies(system, st, parts.fs, _selected_forces(parts, f), REUSE_TOL)
-                                 for f in cache.candidates(cls)):
-            known = True
-        if known is None:
-            stats.stationary_lps += 1
-            found = min_total_normal(system, st, parts.fs)
-            if found is None:
-                violation = stationary_violation(system, st, parts.fs)
-                cache.add_infeasible(cls, violation)
-            else:
-                cache.add_witness(parts, found[1])
-            known = found is not None
-        else:
-            stats.pruned_stationary += 1
-        oracle = parts.oracle()
-        summary = summarize(parts, stationary_known=known, violation=violation, oracle=oracle)
-        stats.dafc_lps += oracle.lp_count
-        results[c] = summary
-        feasible += summary.feasible
-        if limit is not None and feasible >= limit:
-            stats.stopped_at_limit = k + 1 < len(ordered)
-            break
-    if progress is not None:
-        progress(len(ordered), len(ordered))
+    ordered = _order(dict.fromkeys(canonical))
+    results, stats = _Enumeration(system, ordered, admissible, progress).run(workers, limit)
+    stats.combinations = len(canonical)
     return [results[c] for c in canonical if c in results], stats
+
+
+class _Enumeration:
+    """The staged enumeration of :func:`enumerate_combinations` over ``ordered`` (strongest first)."""
+
+    def __init__(self, system: GraspSystem, ordered: list[str], admissible: Callable[[str], bool] | None,
+                 progress: Callable[[int, int], None] | None) -> None:
+        self.system, self.ordered, self.admissible, self.progress = system, ordered, admissible, progress
+        self.results: dict[str, CombinationSummary] = {}
+        self.stats = EnumerationStats()
+        self.kin = FamilyKinematics(system)
+
+    def _tick(self) -> None:
+        if self.progress is not None:
+            self.progress(len(self.results), len(self.ordered))
+
+    def run(self, workers: int, limit: int | None) -> tuple[dict[str, CombinationSummary], EnumerationStats]:
+        self.pool = None
+        if workers > 1 and len(self.ordered) > 1:
+            self.pool = ProcessPoolExecutor(workers, mp_context=mp.get_context("fork"), initializer=_worker_init,
+                                            initargs=(self.system,))
+        try:
+            return self._run(workers, limit)
+        finally:
+            if self.pool is not None:
+                self.pool.shutdown()
+
+    def _run(self, workers: int, limit: int | None) -> tuple[dict[str, CombinationSummary], EnumerationStats]:
+        sy, st, res = self.system, self.stats, self.results
+        D = sy.D
+        a, a_bar = np.zeros(0, dtype=int), np.zeros(0, dtype=int)
+        if self.ordered:
+            chunks = [self.ordered[k:k + DIMS_CHUNK] for k in range(0, len(self.ordered), DIMS_CHUNK)]
+            parts = (self.pool.map(_worker_dims_of, chunks) if self.pool is not None and len(chunks) > 1
+                     else (motion_dims(sy, ch) for ch in chunks))
+            pairs = list(parts)
+            a, a_bar = np.concatenate([p[0] for p in pairs]), np.concatenate([p[1] for p in pairs])
+        self.dims = {c: (int(a[k]), int(a_bar[k])) for k, c in enumerate(self.ordered)}
+        moving: list[str] = []
+        for c in self.ordered:
+            ak, abk = self.dims[c]
+            if abk == 0:
+                st.pruned_motion += 1
+                res[c] = CombinationSummary(c, False, "object cannot move (a~ = 0)", ak, 0, 0, D, True, None)
+            elif self.admissible is not None and not self.admissible(c):
+                st.pruned_modes += 1
+                res[c] = CombinationSummary(c, False, "no object motion realises these contact states",
+                                            ak, abk, 0, D - abk, True, None)
+            else:
+                moving.append(c)
+        self._tick()
+        verdicts = stationary_verdicts(sy, moving)
+        st.stationary_lps += verdicts.lps
+        self.dafc_rows: list[str] = []
+        for k, c in enumerate(moving):
+            ak, abk = self.dims[c]
+            if verdicts.feasible[k]:
+                self.dafc_rows.append(c)
+                continue
+            v = float(verdicts.violation[k])
+            res[c] = CombinationSummary(c, False, no_grasp_reason(None if np.isnan(v) else v), ak, abk, 0,
+                                        D - abk, True, None)
+        st.pruned_stationary = int(np.sum(~verdicts.own))  # (18) decided without an LP of its own
+        self._tick()
+        self._dafc(workers, limit)
+        if limit is not None:
+            self._cut(limit)
+        return res, st
+
+    # -- DAFC: own searches and families ------------------------------------------------------------
+
+    def _commit(self, c: str, summary: CombinationSummary, cert: MemberCertificate | None, lps: int) -> None:
+        self.results[c] = summary
+        self.stats.dafc_lps += lps
+        self.stats.dafc_searched += 1
+        if cert is not None:
+            self._share(cert)
+
+    def _share(self, cert: MemberCertificate, queue: bool = True) -> None:
+        """Decide the undecided combinations of the certificate's family that it passes for, and
+        (``queue``: for the member of an own search) queue its motion for the force LPs of the
+        others below its combination, which it is a motion of."""
+        sy = self.system
+        rows = [c for c in cert.family(sy) if c in self.pending and c not in self.results]
+        if rows:
+            for c, good in zip(rows, cert.check(self.kin, rows), strict=True):
+                if good:
+                    self._feasible(c, cert.motion)
+        if not queue:
+            return
+        for c in cert.below():
+            if c in self.pending and c not in self.results:
+                motions = self.queue.setdefault(c, [])
+                if len(motions) < MOTIONS_PER_ROW:
+                    motions.append(cert.motion)
+
+    def _feasible(self, c: str, motion: Array) -> None:
+        """Record ``c`` as feasible with the member motion ``motion`` (already certified for it);
+        its DAFC dimension and exactness follow after the loop (:meth:`_finish_shared`)."""
+        sy = self.system
+        ak, abk = self.dims[c]
+        self.results[c] = CombinationSummary(c, True, "feasible", ak, abk, 0, sy.D - abk, False,
+                                             motion[sy.M:].copy(), motion)
+        self.shared.append(c)
+        self.stats.dafc_shared += 1
+        self.queue.pop(c, None)
+
+    def _finish_shared(self, pool: ProcessPoolExecutor | None, workers: int = 1) -> None:
+        """The DAFC dimension and exactness of the rows decided by a stronger row's member
+        (:func:`_shared_dims`, in the worker processes when there are any); a row whose allowable
+        cone has no direction (cdd failing) gets its own search."""
+        rows: list[tuple[str, Array, int]] = []
+        for c in self.shared:
+            m = self.results[c].example_motion
+            assert m is not None
+            rows.append((c, m, self.dims[c][1]))
+        if pool is None:
+            out = _shared_dims(self.system, self.kin, rows)
+        else:
+            n = max(1, len(rows) // (4 * workers) + 1)
+            parts = [rows[k:k + n] for k in range(0, len(rows), n)]
+            out = [x for chunk in pool.map(_worker_dims, parts) for x in chunk]
+        for (c, _, _), (dim, exact) in zip(rows, out, strict=True):
+            r = self.results[c]
+            if dim is None:
+                summary, _, lps = _own_search(self.system, c)
+                self.results[c] = summary
+                self.stats.dafc_lps += lps
+                continue
+            self.results[c] = CombinationSummary(c, True, "feasible", r.a, r.a_bar, dim, r.dim_dpfc, exact,
+                                                 r.example_direction, r.example_motion)
+
+    def _dafc(self, workers: int, limit: int | None) -> None:
+        """DAFC of the rows whose stationary grasp exists, level by level (the sum of the force
+        classes, strongest first): a member shares only with weaker combinations (turning contacts
+        to D lowers the level), so the rows of one level depend only on the levels above and are
+        decided together, in the worker processes when there are any: first the force LPs at the
+        queued member motions of stronger rows (:func:`members_at`, batches of ``BATCH`` in the
+        strongest-first order), then their own searches; results are committed in that order, so
+        the table does not depend on the number of workers."""
+        self.pending = set(self.dafc_rows)
+        self.queue: dict[str, list[Array]] = {}  # queued member motions of stronger combinations
+        self.shared: list[str] = []  # decided by a stronger combination's member
+        levels: dict[int, list[str]] = {}
+        for c in self.dafc_rows:
+            levels.setdefault(sum(CLASS[x] for x in c), []).append(c)
+        pool = self.pool
+        for level in sorted(levels, reverse=True):
+            rows = levels[level]
+            while True:  # the queued motions, first ones first
+                todo = [c for c in rows if c not in self.results and self.queue.get(c)]
+                if not todo:
+                    break
+                batches = [[(c, self.queue[c][0]) for c in todo[k:k + BATCH]] for k in range(0, len(todo), BATCH)]
+                outs = (pool.map(_worker_batch, batches) if pool is not None else
+                        (members_at(self.kin, b) for b in batches))
+                for pairs, good in zip(batches, outs, strict=True):
+                    self.stats.dafc_lps += len(pairs)
+                    self.stats.dafc_batched += len(pairs)
+                    for (c, motion), cert in zip(pairs, good, strict=True):
+                        if cert is not None:
+                            self._feasible(c, motion)
+                            self._share(cert, queue=False)  # its motion is queued below already
+                        else:
+                            self.queue[c] = self.queue[c][1:]
+            todo = [c for c in rows if c not in self.results]
+            self._probe(todo, pool)
+            todo = [c for c in todo if c not in self.results]
+            found = (pool.map(_worker_search, todo, chunksize=max(1, min(8, len(todo) // (8 * workers))))
+                     if pool is not None else (_own_search(self.system, c) for c in todo))
+            for k, (c, out) in enumerate(zip(todo, found, strict=True)):
+                self._commit(c, *out)
+                if k % 64 == 63:
+                    self._tick()
+            self._tick()
+            if limit is not None and self._reached(limit, rows[-1]):
+                break
+        self._finish_shared(pool, workers)
+
+    def _probe(self, rows: list[str], pool: ProcessPoolExecutor | None) -> None:
+        """Canonical motions of ``rows`` (:func:`probe_motions`) tried by batched force LPs before
+        their own searches; a member's certificate is shared as an own search's is."""
+        chunks = [rows[k:k + BATCH] for k in range(0, len(rows), BATCH)]
+        outs = (pool.map(_worker_probe, chunks) if pool is not None else (_probe(self.kin, ch) for ch in chunks))
+        for chunk, (certs, tried) in zip(chunks, outs, strict=True):
+            self.stats.dafc_lps += tried
+            self.stats.dafc_batched += tried
+            for c, cert in zip(chunk, certs, strict=True):
+                if cert is not None and c not in self.results:
+                    self._feasible(c, cert.motion)
+                    self.stats.dafc_probed += 1
+                    self._share(cert)
+
+    def _reached(self, limit: int, last: str) -> bool:
+        """Are ``limit`` rows feasible among the rows up to ``last`` (strongest-first order)?"""
+        feasible = 0
+        for c in self.ordered:
+            r = self.results.get(c)
+            feasible += bool(r is not None and r.feasible)
+            if c == last:
+                break
+        return feasible >= limit
+
+    def _cut(self, limit: int) -> None:
+        """Keep the rows up to the ``limit``-th feasible one (strongest-first order)."""
+        feasible = 0
+        for k, c in enumerate(self.ordered):
+            feasible += self.results[c].feasible
+            if feasible >= limit:
+                self.stats.stopped_at_limit = k + 1 < len(self.ordered)
+                for rest in self.ordered[k + 1:]:
+                    self.results.pop(rest, None)
+                return

@@ -114,3 +114,51 @@ def motion_space(system: GraspSystem, sel: Selection) -> MotionSpace:
     Lam_q_t = pinv(J_c) @ G_c_T @ Lam_r_t if M else np.zeros((0, Lam_r_t.shape[1]))
     Lam_qr_t = null_space(J_c) if M else np.zeros((0, 0))
     return MotionSpace(M, Lam, Lam_r_t, Lam_q_t, Lam_qr_t, A_c, A_s, A_d)
+
+
+def _ranks(blocks: Array, letters: Array, chunk: int = 4096) -> Array:
+    """Ranks of the stacked row blocks of many combinations, with the tolerance of
+    :func:`analysis.linalg.rank` (``RANK_RTOL * max(1, s_max)`` of each matrix).
+
+    ``blocks`` ``(L, 2, d, n)``: per contact its rows as an F-point (``d`` rows) and as an S/N-point
+    (its normal row, then ``d - 1`` zero rows); ``letters`` ``(R, L)``: 0 for F, 1 for S/N, 2 for D.
+    Each combination's matrix is padded with zero rows to ``(L d, n)`` (zero rows change no singular
+    value but add zeros), so the SVDs run as one batched LAPACK call per chunk."""
+    from analysis.linalg import RANK_RTOL  # the same tolerance as null_space/orth/rank
+
+    L, _, d, n = blocks.shape
+    R = letters.shape[0]
+    out = np.zeros(R, dtype=int)
+    padded = np.concatenate([blocks, np.zeros((L, 1, d, n))], axis=1)  # (L, 3, d, n): D = no rows
+    rows = np.arange(L)
+    for s in range(0, R, chunk):
+        idx = letters[s : s + chunk]  # (k, L)
+        mats = padded[rows[None, :], idx].reshape(idx.shape[0], L * d, n)  # (k, L d, n)
+        if n == 0 or L * d == 0:
+            continue
+        sv = np.linalg.svd(mats, compute_uv=False)  # (k, min(L d, n))
+        tol = RANK_RTOL * np.maximum(1.0, sv[:, 0])
+        out[s : s + chunk] = np.sum(sv > tol[:, None], axis=1)
+    return out
+
+
+def motion_dims(system: GraspSystem, combinations: list[str]) -> tuple[Array, Array]:
+    """``(a, a_bar)`` of eq. (7) and (19) for many combinations at once, without building their
+    motion spaces: ``a = M + D - rank(A_c)`` and ``a_bar = a - dim null(J_c)`` (the split of
+    :func:`motion_space`, whose :class:`MotionSpace` checks ``a = a_bar + dim null(J_c)``), the
+    ranks with the tolerance of :mod:`analysis.linalg`. Returns two ``(R,)`` integer arrays."""
+    L, d, M = system.L, system.d, system.M
+    n = M + system.D
+    blocks_A = np.zeros((L, 2, d, n))  # (L, 2, d, M + D)
+    blocks_J = np.zeros((L, 2, d, M))
+    for i in range(L):
+        A_i = system.contact_A(i)  # (d, M + D)
+        blocks_A[i, 0] = A_i
+        blocks_A[i, 1, 0] = system.normals[i] @ A_i
+        blocks_J[i, 0] = system.J_blocks[i]
+        blocks_J[i, 1, 0] = system.normals[i] @ system.J_blocks[i]
+    code = {"F": 0, "S": 1, "N": 1, "D": 2}
+    letters = np.array([[code[s] for s in c] for c in combinations], dtype=np.intp).reshape(-1, L)
+    a = n - _ranks(blocks_A, letters)
+    null_J = M - _ranks(blocks_J, letters) if M else np.zeros(len(combinations), dtype=int)
+    return a, a - null_J

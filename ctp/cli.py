@@ -132,7 +132,8 @@ def analyze(
     plot: Annotated[Path | None, typer.Option(help="draw the scene and DAFC directions (PNG)")] = None,
     feasible_only: Annotated[bool, typer.Option(help="list only feasible combinations")] = False,
     samples: Annotated[int | None, typer.Option(help="directions sampled for the DAFC set (--combination)")] = None,
-    prune_modes: Annotated[bool, typer.Option(help="prune with kinematic contact modes")] = True,
+    prune_modes: Annotated[bool | None, typer.Option(help="prune with kinematic contact modes (default: up to "
+                                                     f"{MODES_PRUNE_MAX} contacts)")] = None,
     where: Annotated[str | None, typer.Option(help="only combinations with these letter counts, e.g. 'D>=3' "
                                               "or 'F<=2, S==0'")] = None,
     limit: Annotated[int | None, typer.Option(help="stop after this many feasible combinations "
@@ -229,8 +230,18 @@ def analyze(
         console.print(f"wrote {plot}")
 
 
-def _enumerate(system: Any, prune_modes: bool, where: Any = None, limit: int | None = None) -> tuple[list[Any], bool]:
+#: ``ctp analyze`` prunes the table with the contact modes by default up to this many contacts:
+#: beyond, listing the stick/slide/separate patterns costs more than the combinations they would
+#: spare (12 contacts: 386,336 patterns, over two minutes), whose motion space, stationary grasp
+#: and DAFC the enumeration decides anyway.
+MODES_PRUNE_MAX = 9
+
+
+def _enumerate(system: Any, prune_modes: bool | None, where: Any = None, limit: int | None = None
+               ) -> tuple[list[Any], bool]:
     admissible = None
+    if prune_modes is None:
+        prune_modes = system.L <= MODES_PRUNE_MAX
     if prune_modes:
         modes = enumerate_modes(system, refine=False)
         admissible = lambda c: combination_admissible(modes, c)  # noqa: E731

@@ -465,3 +465,52 @@ class RowBoundLP:
                 continue
             raise SolverError("HiGHS", f"mode LP ended with status '{self._h.modelStatusToString(ms)}'")
         raise AssertionError("unreachable")
+
+
+def solve_sparse_lp(
+    c: Array,  # (n,)
+    start: NDArray[np.int32],  # (n + 1,) column starts of the constraint matrix (CSC)
+    index: NDArray[np.int32],  # (nnz,) row indices
+    value: Array,  # (nnz,)
+    row_lower: Array,  # (m,)
+    row_upper: Array,  # (m,)
+    col_lower: Array,  # (n,)
+    col_upper: Array,  # (n,)
+    maximize: bool = False,
+    feasibility: float = FEAS_TOL,
+) -> tuple[Status, Array | None]:
+    """One-shot ``min/max c^T x`` s.t. ``row_lower <= A x <= row_upper``, ``col_lower <= x <=
+    col_upper`` with ``A`` given column-compressed (large block-diagonal LPs: many small problems
+    in one HiGHS call). Returns the status and the optimal point (None unless optimal); an
+    undecided run is retried as :class:`LPModel` does, then raised as :class:`SolverError`."""
+    n, m = len(c), len(row_lower)
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    h.setOptionValue("primal_feasibility_tolerance", feasibility)
+    h.setOptionValue("dual_feasibility_tolerance", FEAS_TOL)
+    lp = highspy.HighsLp()
+    lp.num_col_, lp.num_row_ = n, m
+    lp.col_cost_ = (-1.0 if maximize else 1.0) * np.asarray(c, dtype=float)
+    lp.col_lower_, lp.col_upper_ = np.asarray(col_lower, dtype=float), np.asarray(col_upper, dtype=float)
+    lp.row_lower_, lp.row_upper_ = np.asarray(row_lower, dtype=float), np.asarray(row_upper, dtype=float)
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = start
+    lp.a_matrix_.index_ = index
+    lp.a_matrix_.value_ = value
+    if h.passModel(lp) == highspy.HighsStatus.kError:
+        raise SolverError("HiGHS", "the sparse LP was rejected")
+    h.run()
+    ms = h.getModelStatus()
+    if ms in _RETRY:
+        h.setOptionValue("solver", "ipm")
+        h.setOptionValue("run_crossover", "on")
+        h.clearSolver()
+        h.run()
+        ms = h.getModelStatus()
+    if ms == _OPTIMAL:
+        return "optimal", np.asarray(h.getSolution().col_value, dtype=float)
+    if ms == highspy.HighsModelStatus.kInfeasible:
+        return "infeasible", None
+    if ms == highspy.HighsModelStatus.kUnbounded:
+        return "unbounded", None
+    raise SolverError("HiGHS", f"sparse LP ended with status '{h.modelStatusToString(ms)}'")

@@ -177,3 +177,93 @@ def check_member(data: dict[str, Any], combination: str, dq: Array, dr: Array) -
     for v, (i, g) in zip(lam, owner, strict=True):
         forces[i] += v * g
     return MemberCheck(tuple(errors), float(dr @ (W @ lam + w_ex)), forces, work_min)
+
+
+def planar_jacobians(data: dict[str, Any]) -> list[Array]:
+    """Per contact of a 2-D scene its ``(2, M)`` point Jacobian, from the fingers' base, link
+    lengths and ``q`` (forward kinematics written here): joint ``j`` at ``p_j`` moves a point
+    ``x`` of a later link by ``z x (x - p_j)``; zero for fixed bodies."""
+    sizes = [len(f["links"]) for f in data["fingers"]]
+    offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+    out = []
+    for c in data["contacts"]:
+        J = np.zeros((2, int(offsets[-1])))
+        if "/" in c["body"]:
+            name, k = c["body"].split("/", 1)
+            i = next(m for m, f in enumerate(data["fingers"]) if f["name"] == name)
+            f = data["fingers"][i]
+            p = np.asarray(f["base"]["position"], float)
+            ang = float(f["base"].get("angle", 0.0))
+            x = np.asarray(c["point"], float)
+            for j, (link, q) in enumerate(zip(f["links"], f["q"], strict=True)):
+                ang += q
+                if j <= int(k):
+                    r = x - p
+                    J[:, offsets[i] + j] = [-r[1], r[0]]
+                p = p + link["length"] * np.array([np.cos(ang), np.sin(ang)])
+        out.append(J)
+    return out
+
+
+def check_member_planar(data: dict[str, Any], combination: str, dq: Array, dr: Array) -> MemberCheck:
+    """:func:`check_member` for a 2-D scene (object twist ``[v_x, v_y, omega]`` at ``p_o``;
+    friction cones exact: the two edges ``n +- mu t``)."""
+    assert int(data["dim"]) == 2
+    pts = np.array([c["point"] for c in data["contacts"]], float)
+    nrm = np.array([c["normal"] for c in data["contacts"]], float)
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    mu = np.array([c["mu"] for c in data["contacts"]], float)
+    p_o = np.asarray(data["object"]["pose"]["position"], float)
+    w_ex = np.asarray(data["external_wrench"], float)
+    F0 = max(float(np.linalg.norm(w_ex)), 1e-12)
+    ell = float(data["object"]["shape"].get("radius", np.max(np.linalg.norm(pts - p_o, axis=1))))
+    Js = planar_jacobians(data)
+    M = Js[0].shape[1]
+    G = [np.array([[1.0, 0.0], [0.0, 1.0], [-(p - p_o)[1], (p - p_o)[0]]]) for p in pts]  # (3, 2)
+    dq, dr = np.asarray(dq, float), np.asarray(dr, float)
+    size = float(np.linalg.norm(np.r_[dq, dr]))
+    eq_rows: list[Array] = []
+    errors: list[str] = []
+    cols: list[Array] = []
+    normal: list[float] = []
+    for i, s in enumerate(combination):
+        A_i = np.hstack([Js[i], -G[i].T])  # (2, M + 3)
+        v_rel = A_i @ np.r_[dq, dr]
+        n = nrm[i]
+        t = np.array([-n[1], n[0]])
+        if s == "F":
+            eq_rows.extend(A_i)
+            if np.linalg.norm(v_rel) > MOTION_TOL * size:
+                errors.append(f"contact {i} (F) moves relative to the object")
+            gens = [n + mu[i] * t, n - mu[i] * t]
+        elif s in "SN":
+            eq_rows.append(n @ A_i)
+            if abs(n @ v_rel) > MOTION_TOL * size:
+                errors.append(f"contact {i} ({s}) separates or penetrates")
+            slip = -v_rel
+            if s == "S" and np.linalg.norm(slip) <= SLIP_MIN * size:
+                errors.append(f"contact {i} (S) does not slide")
+            gens = [n - mu[i] * slip / np.linalg.norm(slip)] if s == "S" and np.linalg.norm(slip) > 0 else [n]
+        else:
+            if n @ v_rel > MOTION_TOL * size:
+                errors.append(f"contact {i} (D) penetrates")
+            gens = []
+        for g in gens:
+            cols.append(G[i] @ g)
+            normal.append(1.0)
+    N = null_space(np.array(eq_rows)) if eq_rows else np.eye(M + 3)
+    U, sv, _ = np.linalg.svd(N[M:], full_matrices=False)
+    basis = U[:, sv > 1e-9 * max(1.0, float(sv.max(initial=0.0)))]
+    perp = null_space(basis.T) if basis.shape[1] < 3 else np.zeros((3, 0))
+    work_min = WORK_MIN * F0 * float(np.linalg.norm(np.r_[dr[:2], dr[2:] * ell]))
+    if not cols:
+        ok = perp.shape[1] == 0 or bool(np.linalg.norm(perp.T @ w_ex) <= 1e-9 * F0)
+        return MemberCheck(tuple(errors), float(dr @ w_ex) if ok else -np.inf, None, work_min)
+    W = np.array(cols).T  # (3, n)
+    res = linprog(-(dr @ W) / F0, A_ub=np.array(normal)[None, :], b_ub=[GRIP],
+                  A_eq=perp.T @ W / F0 if perp.shape[1] else None,
+                  b_eq=-perp.T @ w_ex / F0 if perp.shape[1] else None,
+                  bounds=[(0, None)] * len(cols), method=METHOD)
+    if res.status != 0:
+        return MemberCheck(tuple(errors), -np.inf, None, work_min)
+    return MemberCheck(tuple(errors), float(dr @ (W @ (res.x * F0) + w_ex)), None, work_min)
