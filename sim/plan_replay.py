@@ -89,7 +89,7 @@ case).
   contact points (the planner projects it onto them), so it is a self-motion, and the posture
   torque, its reference moving along the path (rate at least ``3 / T`` for the move time ``T``),
   takes the finger along it: the released link comes off the object (the Allegro thumb's pad,
-  ``tests/sim/test_urdf_geometry.py``) and no force is pushed onto the object.
+  ``tests/sim/test_mjcf_urdf_geometry.py``) and no force is pushed onto the object.
 * ``contact`` (33, D -> F): the moving finger is driven along ``joint_path`` (the OMPL transfer,
   last waypoint touching) while the others hold with ``tau_st``; on arrival it becomes
   torque-controlled and the torques ramp to the holding torque of the grasp after the step.
