@@ -463,6 +463,23 @@ class CollisionModel:
             terms = terms - allowance
         return float(terms.min()) if terms.size else float(np.inf)
 
+    def is_clear(
+        self,
+        finger: int,
+        q: Array,
+        position: Array,
+        rotation: Array,
+        touching: Sequence[BodyRef] = (),
+        allowance: Array | None = None,
+    ) -> bool:
+        """``finger_clearance(...) >= 0``, exactly, without the clearance's value: a capsule finger
+        evaluates a block only where a lower bound of one of its terms is below 0, and stops once a
+        term is negative (as :meth:`clear_many`)."""
+        fd = self._finger_data(finger)
+        if not (fd.urdf or fd.coal_object):
+            return self._capsule_clearance_min(fd, finger, q, position, rotation, touching, allowance, True) >= 0.0
+        return self.finger_clearance(finger, q, position, rotation, touching, allowance) >= 0.0
+
     def finger_clearances(
         self,
         finger: int,
@@ -480,6 +497,36 @@ class CollisionModel:
         in one pass (forward kinematics and distances vectorised over them), the minimum of
         ``terms - allowance`` per configuration. Other fingers (URDF shapes, a mesh object): one
         :meth:`finger_clearance` per configuration."""
+        return self._finger_clearances(finger, q, X, position, rotation, allowance, touching, False)
+
+    def clear_many(
+        self,
+        finger: int,
+        q: Array,
+        X: Array,
+        position: Array,
+        rotation: Array,
+        allowance: Array | None = None,
+        touching: Sequence[BodyRef] = (),
+    ) -> Array:
+        """``finger_clearances(...) >= 0`` ``(N,)`` bool, exactly, for validity checks that want
+        no clearance values (OMPL's): capsule serial chains evaluate a block (link pairs, fixed
+        bodies) only where a lower bound of one of its terms is below 0 and the configuration is
+        not already known to collide (:meth:`_clearances_min` with ``sign_only``); every term
+        evaluated is the same, bit for bit, and a term skipped is at least its bound, above 0."""
+        return self._finger_clearances(finger, q, X, position, rotation, allowance, touching, True) >= 0.0
+
+    def _finger_clearances(
+        self,
+        finger: int,
+        q: Array,
+        X: Array,
+        position: Array,
+        rotation: Array,
+        allowance: Array | None,
+        touching: Sequence[BodyRef],
+        sign_only: bool,
+    ) -> Array:
         fd = self._finger_data(finger)
         X = np.asarray(X, dtype=float)
         N = X.shape[0]
@@ -503,7 +550,7 @@ class CollisionModel:
                   if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
         segs = [(np.broadcast_to(sg[0], (N, *sg[0].shape)), np.broadcast_to(sg[1], (N, *sg[1].shape)))
                 for sg in (self._segments_cached(k, q) for k in others)]
-        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching)
+        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching, sign_only)
 
     def clearances_along(
         self,
@@ -557,11 +604,17 @@ class CollisionModel:
         segs: list[tuple[Array, Array]],
         allowance: Array | None,
         touching: Sequence[BodyRef],
+        sign_only: bool = False,
     ) -> Array:
         """The minimum of ``terms - allowance`` per state of :meth:`finger_clearances` and
         :meth:`clearances_along`: the finger's link axes ``A``, ``B`` ``(N, n, d)``, their distances
         ``od`` ``(N, n)`` to the object, the link axes ``(N, n_k, d)`` of each finger checked against
-        it; own and other pairs and fixed bodies culled by their lower bounds."""
+        it; own and other pairs and fixed bodies culled by their lower bounds.
+
+        ``sign_only`` (:meth:`clear_many`): only whether each minimum is ``>= 0`` is wanted, so a
+        block is evaluated only where a lower bound of one of its terms is below 0 and the state's
+        minimum so far is not yet negative (instead of below the minimum so far); the values
+        returned then have the sign of the true minima, not their value."""
         N, n, d = A.shape
         Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         if allowance is None:
@@ -592,7 +645,7 @@ class CollisionModel:
             Mid = 0.5 * (S0 + S1)  # (N, n_s, d)
             gap = Mid[:, i] - Mid[:, j]  # (N, p, d)
             bound = np.sqrt((gap * gap).sum(axis=2)) - fd.pair_half - fd.pair_radii - al[2 * n:]  # (N, p)
-            need = (bound - 1e-9 < best[:, None]).reshape(N * p)
+            need = (bound - 1e-9 < self._cut(best, sign_only)[:, None]).reshape(N * p)
             if need.any():
                 pd = np.full(N * p, np.inf)
                 pd[need] = segment_segment_distances(S0[:, i].reshape(N * p, d)[need], S1[:, i].reshape(N * p, d)[need],
@@ -615,7 +668,8 @@ class CollisionModel:
                 lb = shape_signed_distances(bodies[0].shape, C, d) - half
                 for fb in bodies[1:]:
                     lb = np.minimum(lb, shape_signed_distances(fb.shape, C, d) - half)
-                need = checked & ((lb.reshape(N, n) - fd.r_infl - al_f - 1e-9) < best[:, None]).reshape(N * n)
+                need = checked & ((lb.reshape(N, n) - fd.r_infl - al_f - 1e-9)
+                                  < self._cut(best, sign_only)[:, None]).reshape(N * n)
             if need.any():
                 # sampled as the whole block would be: the sample count from the longest link
                 length = float(2.0 * half.max())
@@ -627,6 +681,15 @@ class CollisionModel:
                 fixed[need] = dist - r_all[need] - al_f[np.flatnonzero(need) % n]
                 best = np.minimum(best, fixed.reshape(N, n).min(axis=1))
         return np.asarray(best)
+
+    @staticmethod
+    def _cut(best: Array, sign_only: bool) -> Array:
+        """The value ``(N,)`` below which a lower bound makes a block worth evaluating: the minimum
+        so far; for ``sign_only``, 0 where the minimum so far is not negative (a term that is
+        surely ``>= 0`` cannot change the sign) and ``-inf`` where it is (the sign is known)."""
+        if not sign_only:
+            return best
+        return np.where(best < 0.0, -np.inf, 0.0)
 
     @functools.cached_property
     def _fixed_bounded(self) -> bool:
@@ -670,13 +733,15 @@ class CollisionModel:
         rotation: Array,
         touching: Sequence[BodyRef],
         allowance: Array | None,
+        sign_only: bool = False,
     ) -> float:
         """``min(clearance_terms - allowance)`` of a capsule finger, bit for bit: the object terms
         first, then a block (own/other link pairs, fixed bodies) only where a lower bound of one of
         its terms is below the minimum so far. The bounds use that a distance function is
         1-Lipschitz: a segment of length ``L`` and midpoint ``c`` is at least ``dist(c) - L/2``
         from a convex body, two segments at least ``|c_a - c_b| - (L_a + L_b)/2`` apart (the
-        sampled box distances are never below the exact ones)."""
+        sampled box distances are never below the exact ones). ``sign_only`` (:meth:`is_clear`):
+        a value with the sign of the minimum only (blocks culled against 0, none once negative)."""
         n = len(fd.refs)
         d = self.scene.dim
         A, B = self.segment_arrays(finger, q)  # (n, d), (n, d)
@@ -693,6 +758,8 @@ class CollisionModel:
             obj = obj - al[:n]
         best = float(obj.min()) if n else float(np.inf)
         margin = 1e-9  # the bounds' rounding, far above it
+        if sign_only and best < 0.0:
+            return best
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):
             others = [k for k in range(len(self.hand.fingers))
@@ -709,12 +776,14 @@ class CollisionModel:
             bound = np.sqrt((mid * mid).sum(axis=1)) - half - fd.pair_radii  # (p,) <= the terms
             if al is not None:
                 bound = bound - al[2 * n:]
-            need = bound - margin < best
+            need = bound - margin < (0.0 if sign_only else best)
             if need.any():
                 pd = segment_segment_distances(P0[need], P1[need], Q0[need], Q1[need]) - fd.pair_radii[need]
                 if al is not None:
                     pd = pd - al[2 * n:][need]
                 best = min(best, float(pd.min()))
+        if sign_only and best < 0.0:
+            return best
         if fd.any_fixed:
             A2, skip = _trimmed_at_base(A, B, fd.base, fd.r_infl)
             checked = fd.fixed_checked & ~skip
@@ -729,7 +798,7 @@ class CollisionModel:
                     for fb in self.scene.fixed_bodies:
                         lb = np.minimum(lb, shape_signed_distances(fb.shape, C, d) - half_f)
                     lb = lb - fd.r_infl - al_f
-                    do = bool(np.any(lb[checked] - margin < best))
+                    do = bool(np.any(lb[checked] - margin < (0.0 if sign_only else best)))
                 else:
                     do = True
                 if do:  # the block exactly as clearance_terms evaluates it

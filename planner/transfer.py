@@ -108,7 +108,7 @@ def plan_transfer(
             return False
         qq = q_full.copy()
         qq[sl] = x
-        return model.finger_clearance(finger, qq, pos, rot, (), allow) >= 0.0
+        return model.is_clear(finger, qq, pos, rot, (), allow)
 
     lo_tol, hi_tol = j_lo - 1e-9, j_hi + 1e-9
 
@@ -116,7 +116,7 @@ def plan_transfer(
         inside = np.all((rows >= lo_tol) & (rows <= hi_tol), axis=1)
         out = np.zeros(len(rows), dtype=bool)
         if inside.any():
-            out[inside] = model.finger_clearances(finger, q_full, rows[inside], pos, rot, allow) >= 0.0
+            out[inside] = model.clear_many(finger, q_full, rows[inside], pos, rot, allow)
         return out
 
     if not valid_q(start):

@@ -157,3 +157,56 @@ def test_clearances_along_a_path_equal_one_state_at_a_time(name: str) -> None:
             verdicts |= set((got >= 0.0).tolist())
     if name not in ("baxter_hug_box", "panda_forearm_box"):
         assert verdicts == {True, False}
+
+
+@pytest.mark.parametrize("name", ["sphere_four_finger_palm", "planar_disk_envelope", "sphere_four_finger_wrap",
+                                  "baxter_hug_box"])
+def test_sign_only_checks_equal_the_clearance_sign(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``clear_many`` and ``is_clear`` (OMPL's validity checks: blocks culled against 0, not against
+    the minimum so far) answer ``finger_clearance(...) >= 0`` exactly, with and without an
+    allowance and touching links, at configurations about the start where both verdicts occur; on
+    the capsule scenes they evaluate fewer pair and fixed-body blocks than the exact minimum."""
+    scene = load_scene(ROOT / "examples" / f"{name}.json")
+    hand = HandKinematics.from_scene(scene)
+    model = CollisionModel.of(scene, hand)
+    pos = np.asarray(scene.object.pose.position, dtype=float)
+    rot = Rotation.from_rotvec([0.0, 0.0, 0.05]).as_matrix() if scene.dim == 3 else np.eye(3)
+    rng = np.random.default_rng(5)
+    rows = {"n": 0}
+    orig_box, orig_seg = collision_mod._shape_segments_distance, collision_mod.segment_segment_distances
+
+    def box(*a: object, **k: object) -> np.ndarray:
+        rows["n"] += len(a[1])  # type: ignore[arg-type]
+        return orig_box(*a, **k)  # type: ignore[arg-type]
+
+    def seg(*a: np.ndarray) -> np.ndarray:
+        rows["n"] += len(a[0])
+        return orig_seg(*a)
+
+    monkeypatch.setattr(collision_mod, "_shape_segments_distance", box)
+    monkeypatch.setattr(collision_mod, "segment_segment_distances", seg)
+    verdicts = set()
+    exact_rows = sign_rows = 0
+    for f in range(len(hand.fingers)):
+        sl = hand.finger_slice(f)
+        chain = hand.fingers[f]
+        tip = BodyRef(f"{chain.name}/{chain.n_joints - 1}", f, chain.n_joints - 1)
+        X = hand.q0[sl] + rng.normal(0.0, 1.2, (60 if name != "baxter_hug_box" else 4, sl.stop - sl.start))
+        allow = np.minimum(0.0, rng.normal(0.0, 0.01, model.clearance_terms(f, hand.q0, pos, rot).size))
+        for al, touching in ((None, ()), (allow, ()), (allow, (tip,))):
+            rows["n"] = 0
+            want = model.finger_clearances(f, hand.q0, X, pos, rot, al, touching) >= 0.0
+            exact_rows += rows["n"]
+            rows["n"] = 0
+            got = model.clear_many(f, hand.q0, X, pos, rot, al, touching)
+            sign_rows += rows["n"]
+            np.testing.assert_array_equal(got, want)
+            q = hand.q0.copy()
+            for x, w in zip(X, want, strict=True):
+                q[sl] = x
+                assert model.is_clear(f, q, pos, rot, touching, al) == bool(w)
+                assert bool(w) == (model.finger_clearance(f, q, pos, rot, touching, al) >= 0.0)
+            verdicts |= set(want.tolist())
+    if name != "baxter_hug_box":  # (its arms press on the box about q0: all in contact)
+        assert verdicts == {True, False}
+        assert sign_rows < exact_rows
