@@ -244,8 +244,7 @@ def _box_segments_distance(c: Array, h: Array, A: Array, B: Array, step: float, 
     convex set is convex along a segment, so its minimum lies within one coarse interval of the
     best of ``coarse`` evenly spaced samples; only those two intervals are sampled finely."""
     D = B - A
-    longest = float(np.sqrt((D * D).sum(axis=1).max())) if len(A) else 0.0
-    L = longest if length is None else float(length)
+    L = float(length) if length is not None else float(np.sqrt((D * D).sum(axis=1).max())) if len(A) else 0.0
     n = max(2, int(np.ceil(L / step)) + 1)
     if n <= 2 * coarse:  # short segments: sample them whole
         T = _unit_samples(n)
@@ -398,7 +397,7 @@ class CollisionModel:
         got = self._cache.get(key)
         if got is None:
             if len(self._cache) > 4096:
-                for k in [k for k in self._cache if k[0] in ("segs", "cores")]:
+                for k in [k for k in self._cache if k[0] in ("segs", "cores", "stacked")]:
                     del self._cache[k]
             got = self._cache[key] = self.cores(finger, q)
         return got
@@ -546,11 +545,31 @@ class CollisionModel:
         Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         od = _shape_segments_distance(self.scene.object.shape, (Af - pos) @ R, (Bf - pos) @ R, d, self.sample_step)
         od = od.reshape(N, n)
-        others = [k for k in range(len(self.hand.fingers))
-                  if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
-        segs = [(np.broadcast_to(sg[0], (N, *sg[0].shape)), np.broadcast_to(sg[1], (N, *sg[1].shape)))
-                for sg in (self._segments_cached(k, q) for k in others)]
+        stacked = self._others_stacked(finger, q)
+        segs = [] if stacked is None else [(np.broadcast_to(stacked[0], (N, *stacked[0].shape)),
+                                            np.broadcast_to(stacked[1], (N, *stacked[1].shape)))]
         return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching, sign_only)
+
+    def _others_stacked(self, finger: int, q: Array) -> tuple[Array, Array] | None:
+        """The link axes ``(n_o, d)``, ``(n_o, d)`` of the fingers checked against ``finger`` at the
+        hand configuration ``q``, stacked in :attr:`_FingerData.stacked` order (cached by ``q``: a
+        transfer asks for them at every check); ``None`` without such fingers."""
+        others = self._cache.get(("others", finger))
+        if others is None:
+            others = self._cache[("others", finger)] = [
+                k for k in range(len(self.hand.fingers))
+                if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
+        if not others:
+            return None
+        key = ("stacked", finger, np.asarray(q, dtype=float).tobytes())
+        got = self._cache.get(key)
+        if got is None:
+            if len(self._cache) > 4096:
+                for k in [k for k in self._cache if k[0] in ("segs", "stacked")]:
+                    del self._cache[k]
+            segs = [self._segments_cached(k, q) for k in others]
+            got = self._cache[key] = (np.concatenate([sg[0] for sg in segs]), np.concatenate([sg[1] for sg in segs]))
+        return got
 
     def clearances_along(
         self,
@@ -932,7 +951,7 @@ class CollisionModel:
         got = self._cache.get(key)
         if got is None:
             if len(self._cache) > 4096:
-                for k in [k for k in self._cache if k[0] == "segs"]:
+                for k in [k for k in self._cache if k[0] in ("segs", "stacked")]:
                     del self._cache[k]
             got = self.segment_arrays(finger, q)
             self._cache[key] = got
