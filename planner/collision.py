@@ -651,6 +651,8 @@ class CollisionModel:
         else:
             obj = od - fd.r_infl - al[:n]
         best = obj.min(axis=1)  # (N,) the minimum so far, as in _capsule_clearance_min
+        if sign_only and bool((best < 0.0).all()):  # every configuration collides with the object
+            return np.asarray(best)
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):  # own non-adjacent pairs, then the links of the fingers checked against this one
             S0, S1 = A, B
@@ -670,7 +672,8 @@ class CollisionModel:
                 pd[need] = segment_segment_distances(S0[:, i].reshape(N * p, d)[need], S1[:, i].reshape(N * p, d)[need],
                                                      S0[:, j].reshape(N * p, d)[need], S1[:, j].reshape(N * p, d)[need])
                 best = np.minimum(best, (pd.reshape(N, p) - fd.pair_radii - al[2 * n:]).min(axis=1))
-        if fd.any_fixed:  # the fixed bodies, only for the links whose lower bound is below `best`
+        # the fixed bodies, only for the links whose lower bound is below `best` (sign only: not once all collide)
+        if fd.any_fixed and not (sign_only and bool((best < 0.0).all())):
             tiles = self._cache.get(("tiles", finger, N))
             if tiles is None:
                 tiles = self._cache[("tiles", finger, N)] = (np.tile(fd.r_infl, N), np.tile(fd.fixed_checked, N))
@@ -735,12 +738,13 @@ class CollisionModel:
         Rot = _EYE3 + S[:, :, None, None] * K[0] + C[:, :, None, None] * K[1]  # (N, n, 3, 3) joint rotations
         R = chain.base_R  # (3, 3), then (N, 3, 3) once the first joint turns
         p = chain.base_p + R @ chain.origins[0]  # (3,), then (N, 3)
+        A[:, 0] = p
         for k in range(n):
             R = R @ Rot[:, k]
             end = chain.origins[k + 1] if k + 1 < n else chain.tip
-            A[:, k] = p
             p = p + R @ end  # the end of link k is the origin of joint k + 1
             B[:, k] = p
+        A[:, 1:] = B[:, :-1]
         return A[:, :, :d], B[:, :, :d]
 
     def _capsule_clearance_min(
