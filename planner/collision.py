@@ -470,14 +470,15 @@ class CollisionModel:
         rotation: Array,
         touching: Sequence[BodyRef] = (),
         allowance: Array | None = None,
+        floor: float = 0.0,
     ) -> bool:
-        """``finger_clearance(...) >= 0``, exactly, without the clearance's value: a capsule finger
-        evaluates a block only where a lower bound of one of its terms is below 0, and stops once a
-        term is negative (as :meth:`clear_many`)."""
+        """``finger_clearance(...) >= floor``, exactly, without the clearance's value: a capsule
+        finger evaluates a block only where a lower bound of one of its terms is below ``floor``,
+        and stops once a term is below it (as :meth:`clear_many`)."""
         fd = self._finger_data(finger)
         if not (fd.urdf or fd.coal_object):
-            return self._capsule_clearance_min(fd, finger, q, position, rotation, touching, allowance, True) >= 0.0
-        return self.finger_clearance(finger, q, position, rotation, touching, allowance) >= 0.0
+            return self._capsule_clearance_min(fd, finger, q, position, rotation, touching, allowance, floor) >= floor
+        return self.finger_clearance(finger, q, position, rotation, touching, allowance) >= floor
 
     def finger_clearances(
         self,
@@ -496,7 +497,7 @@ class CollisionModel:
         in one pass (forward kinematics and distances vectorised over them), the minimum of
         ``terms - allowance`` per configuration. Other fingers (URDF shapes, a mesh object): one
         :meth:`finger_clearance` per configuration."""
-        return self._finger_clearances(finger, q, X, position, rotation, allowance, touching, False)
+        return self._finger_clearances(finger, q, X, position, rotation, allowance, touching, None)
 
     def clear_many(
         self,
@@ -507,13 +508,14 @@ class CollisionModel:
         rotation: Array,
         allowance: Array | None = None,
         touching: Sequence[BodyRef] = (),
+        floor: float = 0.0,
     ) -> Array:
-        """``finger_clearances(...) >= 0`` ``(N,)`` bool, exactly, for validity checks that want
+        """``finger_clearances(...) >= floor`` ``(N,)`` bool, exactly, for validity checks that want
         no clearance values (OMPL's): capsule serial chains evaluate a block (link pairs, fixed
-        bodies) only where a lower bound of one of its terms is below 0 and the configuration is
-        not already known to collide (:meth:`_clearances_min` with ``sign_only``); every term
-        evaluated is the same, bit for bit, and a term skipped is at least its bound, above 0."""
-        return self._finger_clearances(finger, q, X, position, rotation, allowance, touching, True) >= 0.0
+        bodies) only where a lower bound of one of its terms is below ``floor`` and the
+        configuration is not already below it (:meth:`_clearances_min` with ``floor``); every term
+        evaluated is the same, bit for bit, and a term skipped is at least its bound, above ``floor``."""
+        return self._finger_clearances(finger, q, X, position, rotation, allowance, touching, floor) >= floor
 
     def _finger_clearances(
         self,
@@ -524,7 +526,7 @@ class CollisionModel:
         rotation: Array,
         allowance: Array | None,
         touching: Sequence[BodyRef],
-        sign_only: bool,
+        floor: float | None,
     ) -> Array:
         fd = self._finger_data(finger)
         X = np.asarray(X, dtype=float)
@@ -548,7 +550,7 @@ class CollisionModel:
         stacked = self._others_stacked(finger, q)
         segs = [] if stacked is None else [(np.broadcast_to(stacked[0], (N, *stacked[0].shape)),
                                             np.broadcast_to(stacked[1], (N, *stacked[1].shape)))]
-        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching, sign_only)
+        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching, floor)
 
     def _others_stacked(self, finger: int, q: Array) -> tuple[Array, Array] | None:
         """The link axes ``(n_o, d)``, ``(n_o, d)`` of the fingers checked against ``finger`` at the
@@ -584,6 +586,32 @@ class CollisionModel:
         and the object at ``positions[k]`` ``(N, d)``, ``rotations[k]`` ``(N, 3, 3)`` (every joint and
         the object move, as along an object motion); returns ``(N,)``, equal to one state at a time
         bit for bit (as :meth:`finger_clearances`, which keeps the other joints and the object still)."""
+        return self._clearances_along(finger, Q, positions, rotations, allowance, touching, None)
+
+    def clear_along(
+        self,
+        finger: int,
+        Q: Array,
+        positions: Array,
+        rotations: Array,
+        allowance: Array | None = None,
+        touching: Sequence[BodyRef] = (),
+        floor: float = 0.0,
+    ) -> Array:
+        """``clearances_along(...) >= floor`` ``(N,)`` bool, exactly, with the blocks culled against
+        ``floor`` (as :meth:`clear_many`)."""
+        return self._clearances_along(finger, Q, positions, rotations, allowance, touching, floor) >= floor
+
+    def _clearances_along(
+        self,
+        finger: int,
+        Q: Array,
+        positions: Array,
+        rotations: Array,
+        allowance: Array | None,
+        touching: Sequence[BodyRef],
+        floor: float | None,
+    ) -> Array:
         fd = self._finger_data(finger)
         Q = np.asarray(Q, dtype=float)
         N = Q.shape[0]
@@ -600,7 +628,7 @@ class CollisionModel:
         od = _shape_segments_distance(self.scene.object.shape, ((A - pos) @ R).reshape(N * n, d),
                                       ((B - pos) @ R).reshape(N * n, d), d, self.sample_step).reshape(N, n)
         segs = [self._segment_arrays_many(k, Q[:, self.hand.finger_slice(k)]) for k in others]
-        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching)
+        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching, floor)
 
     def batched(self, finger: int) -> bool:
         """Whether :meth:`clearances_along` evaluates ``finger``'s states in one pass (a capsule
@@ -623,17 +651,17 @@ class CollisionModel:
         segs: list[tuple[Array, Array]],
         allowance: Array | None,
         touching: Sequence[BodyRef],
-        sign_only: bool = False,
+        floor: float | None = None,
     ) -> Array:
         """The minimum of ``terms - allowance`` per state of :meth:`finger_clearances` and
         :meth:`clearances_along`: the finger's link axes ``A``, ``B`` ``(N, n, d)``, their distances
         ``od`` ``(N, n)`` to the object, the link axes ``(N, n_k, d)`` of each finger checked against
         it; own and other pairs and fixed bodies culled by their lower bounds.
 
-        ``sign_only`` (:meth:`clear_many`): only whether each minimum is ``>= 0`` is wanted, so a
-        block is evaluated only where a lower bound of one of its terms is below 0 and the state's
-        minimum so far is not yet negative (instead of below the minimum so far); the values
-        returned then have the sign of the true minima, not their value."""
+        ``floor`` (:meth:`clear_many`): only whether each minimum is ``>= floor`` is wanted, so a
+        block is evaluated only where a lower bound of one of its terms is below ``floor`` and the
+        state's minimum so far is not yet below it (instead of below the minimum so far); the
+        values returned are then on the same side of ``floor`` as the true minima, not their value."""
         N, n, d = A.shape
         Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         if allowance is None:
@@ -651,7 +679,7 @@ class CollisionModel:
         else:
             obj = od - fd.r_infl - al[:n]
         best = obj.min(axis=1)  # (N,) the minimum so far, as in _capsule_clearance_min
-        if sign_only and bool((best < 0.0).all()):  # every configuration collides with the object
+        if floor is not None and bool((best < floor).all()):  # every configuration is already below
             return np.asarray(best)
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):  # own non-adjacent pairs, then the links of the fingers checked against this one
@@ -666,14 +694,14 @@ class CollisionModel:
             Mid = 0.5 * (S0 + S1)  # (N, n_s, d)
             gap = Mid[:, i] - Mid[:, j]  # (N, p, d)
             bound = np.sqrt((gap * gap).sum(axis=2)) - fd.pair_half - fd.pair_radii - al[2 * n:]  # (N, p)
-            need = (bound - 1e-9 < self._cut(best, sign_only)[:, None]).reshape(N * p)
+            need = (bound - 1e-9 < self._cut(best, floor)[:, None]).reshape(N * p)
             if need.any():
                 pd = np.full(N * p, np.inf)
                 pd[need] = segment_segment_distances(S0[:, i].reshape(N * p, d)[need], S1[:, i].reshape(N * p, d)[need],
                                                      S0[:, j].reshape(N * p, d)[need], S1[:, j].reshape(N * p, d)[need])
                 best = np.minimum(best, (pd.reshape(N, p) - fd.pair_radii - al[2 * n:]).min(axis=1))
-        # the fixed bodies, only for the links whose lower bound is below `best` (sign only: not once all collide)
-        if fd.any_fixed and not (sign_only and bool((best < 0.0).all())):
+        # the fixed bodies, only for the links whose lower bound is below `best` (or `floor`: not once all are below)
+        if fd.any_fixed and not (floor is not None and bool((best < floor).all())):
             tiles = self._cache.get(("tiles", finger, N))
             if tiles is None:
                 tiles = self._cache[("tiles", finger, N)] = (np.tile(fd.r_infl, N), np.tile(fd.fixed_checked, N))
@@ -691,7 +719,7 @@ class CollisionModel:
                 for fb in bodies[1:]:
                     lb = np.minimum(lb, shape_signed_distances(fb.shape, C, d) - half)
                 need = checked & ((lb.reshape(N, n) - fd.r_infl - al_f - 1e-9)
-                                  < self._cut(best, sign_only)[:, None]).reshape(N * n)
+                                  < self._cut(best, floor)[:, None]).reshape(N * n)
             if need.any():
                 # sampled as the whole block would be: the sample count from the longest link
                 length = float(2.0 * half.max())
@@ -705,13 +733,13 @@ class CollisionModel:
         return np.asarray(best)
 
     @staticmethod
-    def _cut(best: Array, sign_only: bool) -> Array:
+    def _cut(best: Array, floor: float | None) -> Array:
         """The value ``(N,)`` below which a lower bound makes a block worth evaluating: the minimum
-        so far; for ``sign_only``, 0 where the minimum so far is not negative (a term that is
-        surely ``>= 0`` cannot change the sign) and ``-inf`` where it is (the sign is known)."""
-        if not sign_only:
+        so far; with a ``floor``, the floor where the minimum so far is not below it (a term surely
+        above the floor cannot change the answer) and ``-inf`` where it is (the answer is known)."""
+        if floor is None:
             return best
-        return np.where(best < 0.0, -np.inf, 0.0)
+        return np.where(best < floor, -np.inf, floor)
 
     @functools.cached_property
     def _fixed_bounded(self) -> bool:
@@ -756,15 +784,16 @@ class CollisionModel:
         rotation: Array,
         touching: Sequence[BodyRef],
         allowance: Array | None,
-        sign_only: bool = False,
+        floor: float | None = None,
     ) -> float:
         """``min(clearance_terms - allowance)`` of a capsule finger, bit for bit: the object terms
         first, then a block (own/other link pairs, fixed bodies) only where a lower bound of one of
         its terms is below the minimum so far. The bounds use that a distance function is
         1-Lipschitz: a segment of length ``L`` and midpoint ``c`` is at least ``dist(c) - L/2``
         from a convex body, two segments at least ``|c_a - c_b| - (L_a + L_b)/2`` apart (the
-        sampled box distances are never below the exact ones). ``sign_only`` (:meth:`is_clear`):
-        a value with the sign of the minimum only (blocks culled against 0, none once negative)."""
+        sampled box distances are never below the exact ones). ``floor`` (:meth:`is_clear`): a value
+        on the same side of ``floor`` as the minimum only (blocks culled against ``floor``, none once
+        below it)."""
         n = len(fd.refs)
         d = self.scene.dim
         A, B = self.segment_arrays(finger, q)  # (n, d), (n, d)
@@ -781,7 +810,7 @@ class CollisionModel:
             obj = obj - al[:n]
         best = float(obj.min()) if n else float(np.inf)
         margin = 1e-9  # the bounds' rounding, far above it
-        if sign_only and best < 0.0:
+        if floor is not None and best < floor:
             return best
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):
@@ -799,13 +828,13 @@ class CollisionModel:
             bound = np.sqrt((mid * mid).sum(axis=1)) - half - fd.pair_radii  # (p,) <= the terms
             if al is not None:
                 bound = bound - al[2 * n:]
-            need = bound - margin < (0.0 if sign_only else best)
+            need = bound - margin < (best if floor is None else floor)
             if need.any():
                 pd = segment_segment_distances(P0[need], P1[need], Q0[need], Q1[need]) - fd.pair_radii[need]
                 if al is not None:
                     pd = pd - al[2 * n:][need]
                 best = min(best, float(pd.min()))
-        if sign_only and best < 0.0:
+        if floor is not None and best < floor:
             return best
         if fd.any_fixed:
             A2, skip = _trimmed_at_base(A, B, fd.base, fd.r_infl)
@@ -821,7 +850,7 @@ class CollisionModel:
                     for fb in self.scene.fixed_bodies:
                         lb = np.minimum(lb, shape_signed_distances(fb.shape, C, d) - half_f)
                     lb = lb - fd.r_infl - al_f
-                    do = bool(np.any(lb[checked] - margin < (0.0 if sign_only else best)))
+                    do = bool(np.any(lb[checked] - margin < (best if floor is None else floor)))
                 else:
                     do = True
                 if do:  # the block exactly as clearance_terms evaluates it

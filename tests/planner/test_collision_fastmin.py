@@ -162,10 +162,12 @@ def test_clearances_along_a_path_equal_one_state_at_a_time(name: str) -> None:
 @pytest.mark.parametrize("name", ["sphere_four_finger_palm", "planar_disk_envelope", "sphere_four_finger_wrap",
                                   "baxter_hug_box"])
 def test_sign_only_checks_equal_the_clearance_sign(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
-    """``clear_many`` and ``is_clear`` (OMPL's validity checks: blocks culled against 0, not against
-    the minimum so far) answer ``finger_clearance(...) >= 0`` exactly, with and without an
-    allowance and touching links, at configurations about the start where both verdicts occur; on
-    the capsule scenes they evaluate fewer pair and fixed-body blocks than the exact minimum."""
+    """``clear_many``, ``clear_along`` and ``is_clear`` (validity checks: blocks culled against a
+    floor, not against the minimum so far) answer ``finger_clearance(...) >= floor`` exactly, with
+    and without an allowance and touching links, at configurations about the start where both
+    verdicts occur (floors 0, -1e-9 as object motions use, -0.01, 0.02; along a path the object
+    moves too); on the capsule scenes they evaluate fewer pair and fixed-body blocks than the
+    exact minimum."""
     scene = load_scene(ROOT / "examples" / f"{name}.json")
     hand = HandKinematics.from_scene(scene)
     model = CollisionModel.of(scene, hand)
@@ -207,6 +209,22 @@ def test_sign_only_checks_equal_the_clearance_sign(name: str, monkeypatch: pytes
                 assert model.is_clear(f, q, pos, rot, touching, al) == bool(w)
                 assert bool(w) == (model.finger_clearance(f, q, pos, rot, touching, al) >= 0.0)
             verdicts |= set(want.tolist())
+            # another floor (object motions accept -1e-9), and along a path where the object moves too
+            values = model.finger_clearances(f, hand.q0, X, pos, rot, al, touching)
+            for floor in (-1e-9, -0.01, 0.02):
+                np.testing.assert_array_equal(model.clear_many(f, hand.q0, X, pos, rot, al, touching, floor),
+                                              values >= floor)
+            Q = np.tile(hand.q0, (len(X), 1))
+            Q[:, sl] = X
+            positions = pos[None, :] + rng.normal(0.0, 0.05, (len(X), len(pos)))
+            rotations = np.repeat(rot[None], len(X), axis=0)
+            along = model.clearances_along(f, Q, positions, rotations, al, touching)
+            for floor in (0.0, -1e-9, -0.01):
+                np.testing.assert_array_equal(model.clear_along(f, Q, positions, rotations, al, touching, floor),
+                                              along >= floor)
+                for k in range(0, len(X), 7):
+                    got_k = model.is_clear(f, Q[k], positions[k], rotations[k], touching, al, floor)
+                    assert got_k == (along[k] >= floor)
     if name != "baxter_hug_box":  # (its arms press on the box about q0: all in contact)
         assert verdicts == {True, False}
         assert sign_rows < exact_rows
