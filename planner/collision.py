@@ -517,6 +517,25 @@ class CollisionModel:
         evaluated is the same, bit for bit, and a term skipped is at least its bound, above ``floor``."""
         return self._finger_clearances(finger, q, X, position, rotation, allowance, touching, floor) >= floor
 
+    def clearances_below(
+        self,
+        finger: int,
+        q: Array,
+        X: Array,
+        floors: Array,
+        position: Array,
+        rotation: Array,
+        allowance: Array | None = None,
+        touching: Sequence[BodyRef] = (),
+    ) -> Array:
+        """:meth:`finger_clearances` ``(N,)`` exact where they are below ``floors`` ``(N,)``, and
+        elsewhere a value at least the floor (and at least the clearance): a block is evaluated only
+        where a lower bound of one of its terms is below the configuration's floor, as long as the
+        minimum so far is not below it (:meth:`clear_many` with one floor per configuration; the
+        certificate of :func:`path_clearance_certified` needs no more)."""
+        return self._finger_clearances(finger, q, X, position, rotation, allowance, touching,
+                                       np.asarray(floors, dtype=float), exact_below=True)
+
     def _finger_clearances(
         self,
         finger: int,
@@ -526,7 +545,8 @@ class CollisionModel:
         rotation: Array,
         allowance: Array | None,
         touching: Sequence[BodyRef],
-        floor: float | None,
+        floor: float | Array | None,
+        exact_below: bool = False,
     ) -> Array:
         fd = self._finger_data(finger)
         X = np.asarray(X, dtype=float)
@@ -550,7 +570,7 @@ class CollisionModel:
         stacked = self._others_stacked(finger, q)
         segs = [] if stacked is None else [(np.broadcast_to(stacked[0], (N, *stacked[0].shape)),
                                             np.broadcast_to(stacked[1], (N, *stacked[1].shape)))]
-        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching, floor)
+        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching, floor, exact_below)
 
     def _others_stacked(self, finger: int, q: Array) -> tuple[Array, Array] | None:
         """The link axes ``(n_o, d)``, ``(n_o, d)`` of the fingers checked against ``finger`` at the
@@ -651,7 +671,8 @@ class CollisionModel:
         segs: list[tuple[Array, Array]],
         allowance: Array | None,
         touching: Sequence[BodyRef],
-        floor: float | None = None,
+        floor: float | Array | None = None,
+        exact_below: bool = False,
     ) -> Array:
         """The minimum of ``terms - allowance`` per state of :meth:`finger_clearances` and
         :meth:`clearances_along`: the finger's link axes ``A``, ``B`` ``(N, n, d)``, their distances
@@ -661,7 +682,10 @@ class CollisionModel:
         ``floor`` (:meth:`clear_many`): only whether each minimum is ``>= floor`` is wanted, so a
         block is evaluated only where a lower bound of one of its terms is below ``floor`` and the
         state's minimum so far is not yet below it (instead of below the minimum so far); the
-        values returned are then on the same side of ``floor`` as the true minima, not their value."""
+        values returned are then on the same side of ``floor`` as the true minima, not their value.
+        With ``exact_below`` (:meth:`clearances_below`) a block is evaluated where a bound is below
+        both the floor and the minimum so far: the values below the floor are exact, the others at
+        least the floor."""
         N, n, d = A.shape
         Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         if allowance is None:
@@ -679,7 +703,7 @@ class CollisionModel:
         else:
             obj = od - fd.r_infl - al[:n]
         best = obj.min(axis=1)  # (N,) the minimum so far, as in _capsule_clearance_min
-        if floor is not None and bool((best < floor).all()):  # every configuration is already below
+        if floor is not None and not exact_below and bool((best < floor).all()):  # all already below
             return np.asarray(best)
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):  # own non-adjacent pairs, then the links of the fingers checked against this one
@@ -694,14 +718,14 @@ class CollisionModel:
             Mid = 0.5 * (S0 + S1)  # (N, n_s, d)
             gap = Mid[:, i] - Mid[:, j]  # (N, p, d)
             bound = np.sqrt((gap * gap).sum(axis=2)) - fd.pair_half - fd.pair_radii - al[2 * n:]  # (N, p)
-            need = (bound - 1e-9 < self._cut(best, floor)[:, None]).reshape(N * p)
+            need = (bound - 1e-9 < self._cut(best, floor, exact_below)[:, None]).reshape(N * p)
             if need.any():
                 pd = np.full(N * p, np.inf)
                 pd[need] = segment_segment_distances(S0[:, i].reshape(N * p, d)[need], S1[:, i].reshape(N * p, d)[need],
                                                      S0[:, j].reshape(N * p, d)[need], S1[:, j].reshape(N * p, d)[need])
                 best = np.minimum(best, (pd.reshape(N, p) - fd.pair_radii - al[2 * n:]).min(axis=1))
         # the fixed bodies, only for the links whose lower bound is below `best` (or `floor`: not once all are below)
-        if fd.any_fixed and not (floor is not None and bool((best < floor).all())):
+        if fd.any_fixed and not (floor is not None and not exact_below and bool((best < floor).all())):
             tiles = self._cache.get(("tiles", finger, N))
             if tiles is None:
                 tiles = self._cache[("tiles", finger, N)] = (np.tile(fd.r_infl, N), np.tile(fd.fixed_checked, N))
@@ -719,7 +743,7 @@ class CollisionModel:
                 for fb in bodies[1:]:
                     lb = np.minimum(lb, shape_signed_distances(fb.shape, C, d) - half)
                 need = checked & ((lb.reshape(N, n) - fd.r_infl - al_f - 1e-9)
-                                  < self._cut(best, floor)[:, None]).reshape(N * n)
+                                  < self._cut(best, floor, exact_below)[:, None]).reshape(N * n)
             if need.any():
                 # sampled as the whole block would be: the sample count from the longest link
                 length = float(2.0 * half.max())
@@ -733,12 +757,15 @@ class CollisionModel:
         return np.asarray(best)
 
     @staticmethod
-    def _cut(best: Array, floor: float | None) -> Array:
+    def _cut(best: Array, floor: float | Array | None, exact_below: bool = False) -> Array:
         """The value ``(N,)`` below which a lower bound makes a block worth evaluating: the minimum
         so far; with a ``floor``, the floor where the minimum so far is not below it (a term surely
-        above the floor cannot change the answer) and ``-inf`` where it is (the answer is known)."""
+        above the floor cannot change the answer) and ``-inf`` where it is (the answer is known);
+        ``exact_below``: the smaller of the floor and the minimum so far (exact below the floor)."""
         if floor is None:
             return best
+        if exact_below:
+            return np.minimum(best, floor)
         return np.where(best < floor, -np.inf, floor)
 
     @functools.cached_property
@@ -1132,8 +1159,10 @@ def path_clearance_certified(
         L = float(np.linalg.norm(p1 - p0))
 
         def clear(t: Array, p0: Array = p0, p1: Array = p1, L: float = L,
-                  touching: Sequence[BodyRef] = touching) -> Array:
+                  touching: Sequence[BodyRef] = touching, floors: Array | None = None) -> Array:
             X = p0[None, :] + (p1 - p0)[None, :] * (t / L if L > 0 else 0.0 * t)[:, None]  # (k, m)
+            if floors is not None:
+                return model.clearances_below(finger, q, X, floors, position, rotation, allowance, touching)
             return model.finger_clearances(finger, q, X, position, rotation, allowance, touching)
 
         ends = np.array([0.0, L]) if L > 0 else np.zeros(1)
@@ -1151,7 +1180,11 @@ def path_clearance_certified(
                 break
             ta, tb, ca, cb = ta[open_], tb[open_], ca[open_], cb[open_]
             tm = 0.5 * (ta + tb)
-            cm = clear(tm)
+            # a middle clearance at least `floor` leaves `worst` as it is and certifies both halves
+            # (ca + cm >= K (tm - ta), cm + cb >= K (tb - tm), 1e-9 above the sums' rounding):
+            # its exact value is needed only below it (CollisionModel.clearances_below)
+            floor = np.maximum(np.maximum(K * (tm - ta) - ca, K * (tb - tm) - cb) + 1e-9, worst)
+            cm = clear(tm, floors=floor)
             checks += len(cm)
             worst = min(worst, float(cm.min()))
             if worst < 0.0:

@@ -228,3 +228,55 @@ def test_sign_only_checks_equal_the_clearance_sign(name: str, monkeypatch: pytes
     if name != "baxter_hug_box":  # (its arms press on the box about q0: all in contact)
         assert verdicts == {True, False}
         assert sign_rows < exact_rows
+
+
+@pytest.mark.parametrize("name", ["sphere_four_finger_palm", "planar_disk_envelope", "sphere_four_finger_wrap"])
+def test_clearances_below_floors_and_the_certificate(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``clearances_below`` is ``finger_clearances`` bit for bit where that is below the floor, and at
+    least the floor elsewhere; ``path_clearance_certified``, which asks for its middle clearances
+    only below the floor that decides the two halves, answers as with every value exact (the same
+    verdict, smallest clearance and number of checks) on random paths of each finger."""
+    scene = load_scene(ROOT / "examples" / f"{name}.json")
+    hand = HandKinematics.from_scene(scene)
+    model = CollisionModel.of(scene, hand)
+    pos = np.asarray(scene.object.pose.position, dtype=float)
+    rot = np.eye(3)
+    rng = np.random.default_rng(9)
+    for f in range(len(hand.fingers)):
+        sl = hand.finger_slice(f)
+        X = hand.q0[sl] + rng.normal(0.0, 1.0, (50, sl.stop - sl.start))
+        exact = model.finger_clearances(f, hand.q0, X, pos, rot)
+        floors = rng.uniform(-0.1, 0.4, 50)
+        got = model.clearances_below(f, hand.q0, X, floors, pos, rot)
+        below = exact < floors
+        assert below.any() and (~below).any()
+        np.testing.assert_array_equal(got[below], exact[below])
+        assert np.all(got[~below] >= floors[~below]) and np.all(got >= exact)
+    results = []
+    for f in range(len(hand.fingers)):
+        sl = hand.finger_slice(f)
+        chain = hand.fingers[f]
+        tip = BodyRef(f"{chain.name}/{chain.n_joints - 1}", f, chain.n_joints - 1)
+        for _ in range(6):
+            path = hand.q0[sl] + np.cumsum(rng.normal(0.0, 0.15, (4, sl.stop - sl.start)), axis=0)
+            path[0] = hand.q0[sl]
+            results.append(collision_mod.path_clearance_certified(model, f, hand.q0, path, pos, rot, [tip], 2))
+    with monkeypatch.context() as m:  # every middle clearance exact
+        m.setattr(CollisionModel, "clearances_below",
+                  lambda self, finger, q, X, floors, *a: self.finger_clearances(finger, q, X, *a))
+        rng = np.random.default_rng(9)
+        for f in range(len(hand.fingers)):  # the same random stream as above
+            sl = hand.finger_slice(f)
+            rng.normal(0.0, 1.0, (50, sl.stop - sl.start))
+            rng.uniform(-0.1, 0.4, 50)
+        k = 0
+        for f in range(len(hand.fingers)):
+            sl = hand.finger_slice(f)
+            chain = hand.fingers[f]
+            tip = BodyRef(f"{chain.name}/{chain.n_joints - 1}", f, chain.n_joints - 1)
+            for _ in range(6):
+                path = hand.q0[sl] + np.cumsum(rng.normal(0.0, 0.15, (4, sl.stop - sl.start)), axis=0)
+                path[0] = hand.q0[sl]
+                assert collision_mod.path_clearance_certified(model, f, hand.q0, path, pos, rot, [tip], 2) == results[k]
+                k += 1
+    assert {ok for ok, _, _ in results} == {True, False}
