@@ -244,8 +244,7 @@ def _box_segments_distance(c: Array, h: Array, A: Array, B: Array, step: float, 
     convex set is convex along a segment, so its minimum lies within one coarse interval of the
     best of ``coarse`` evenly spaced samples; only those two intervals are sampled finely."""
     D = B - A
-    longest = float(np.sqrt((D * D).sum(axis=1).max())) if len(A) else 0.0
-    L = longest if length is None else float(length)
+    L = float(length) if length is not None else float(np.sqrt((D * D).sum(axis=1).max())) if len(A) else 0.0
     n = max(2, int(np.ceil(L / step)) + 1)
     if n <= 2 * coarse:  # short segments: sample them whole
         T = _unit_samples(n)
@@ -398,7 +397,7 @@ class CollisionModel:
         got = self._cache.get(key)
         if got is None:
             if len(self._cache) > 4096:
-                for k in [k for k in self._cache if k[0] in ("segs", "cores")]:
+                for k in [k for k in self._cache if k[0] in ("segs", "cores", "stacked")]:
                     del self._cache[k]
             got = self._cache[key] = self.cores(finger, q)
         return got
@@ -463,6 +462,24 @@ class CollisionModel:
             terms = terms - allowance
         return float(terms.min()) if terms.size else float(np.inf)
 
+    def is_clear(
+        self,
+        finger: int,
+        q: Array,
+        position: Array,
+        rotation: Array,
+        touching: Sequence[BodyRef] = (),
+        allowance: Array | None = None,
+        floor: float = 0.0,
+    ) -> bool:
+        """``finger_clearance(...) >= floor``, exactly, without the clearance's value: a capsule
+        finger evaluates a block only where a lower bound of one of its terms is below ``floor``,
+        and stops once a term is below it (as :meth:`clear_many`)."""
+        fd = self._finger_data(finger)
+        if not (fd.urdf or fd.coal_object):
+            return self._capsule_clearance_min(fd, finger, q, position, rotation, touching, allowance, floor) >= floor
+        return self.finger_clearance(finger, q, position, rotation, touching, allowance) >= floor
+
     def finger_clearances(
         self,
         finger: int,
@@ -480,6 +497,57 @@ class CollisionModel:
         in one pass (forward kinematics and distances vectorised over them), the minimum of
         ``terms - allowance`` per configuration. Other fingers (URDF shapes, a mesh object): one
         :meth:`finger_clearance` per configuration."""
+        return self._finger_clearances(finger, q, X, position, rotation, allowance, touching, None)
+
+    def clear_many(
+        self,
+        finger: int,
+        q: Array,
+        X: Array,
+        position: Array,
+        rotation: Array,
+        allowance: Array | None = None,
+        touching: Sequence[BodyRef] = (),
+        floor: float = 0.0,
+    ) -> Array:
+        """``finger_clearances(...) >= floor`` ``(N,)`` bool, exactly, for validity checks that want
+        no clearance values (OMPL's): capsule serial chains evaluate a block (link pairs, fixed
+        bodies) only where a lower bound of one of its terms is below ``floor`` and the
+        configuration is not already below it (:meth:`_clearances_min` with ``floor``); every term
+        evaluated is the same, bit for bit, and a term skipped is at least its bound, above ``floor``."""
+        return self._finger_clearances(finger, q, X, position, rotation, allowance, touching, floor) >= floor
+
+    def clearances_below(
+        self,
+        finger: int,
+        q: Array,
+        X: Array,
+        floors: Array,
+        position: Array,
+        rotation: Array,
+        allowance: Array | None = None,
+        touching: Sequence[BodyRef] = (),
+    ) -> Array:
+        """:meth:`finger_clearances` ``(N,)`` exact where they are below ``floors`` ``(N,)``, and
+        elsewhere a value at least the floor (and at least the clearance): a block is evaluated only
+        where a lower bound of one of its terms is below the configuration's floor, as long as the
+        minimum so far is not below it (:meth:`clear_many` with one floor per configuration; the
+        certificate of :func:`path_clearance_certified` needs no more)."""
+        return self._finger_clearances(finger, q, X, position, rotation, allowance, touching,
+                                       np.asarray(floors, dtype=float), exact_below=True)
+
+    def _finger_clearances(
+        self,
+        finger: int,
+        q: Array,
+        X: Array,
+        position: Array,
+        rotation: Array,
+        allowance: Array | None,
+        touching: Sequence[BodyRef],
+        floor: float | Array | None,
+        exact_below: bool = False,
+    ) -> Array:
         fd = self._finger_data(finger)
         X = np.asarray(X, dtype=float)
         N = X.shape[0]
@@ -499,11 +567,31 @@ class CollisionModel:
         Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         od = _shape_segments_distance(self.scene.object.shape, (Af - pos) @ R, (Bf - pos) @ R, d, self.sample_step)
         od = od.reshape(N, n)
-        others = [k for k in range(len(self.hand.fingers))
-                  if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
-        segs = [(np.broadcast_to(sg[0], (N, *sg[0].shape)), np.broadcast_to(sg[1], (N, *sg[1].shape)))
-                for sg in (self._segments_cached(k, q) for k in others)]
-        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching)
+        stacked = self._others_stacked(finger, q)
+        segs = [] if stacked is None else [(np.broadcast_to(stacked[0], (N, *stacked[0].shape)),
+                                            np.broadcast_to(stacked[1], (N, *stacked[1].shape)))]
+        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching, floor, exact_below)
+
+    def _others_stacked(self, finger: int, q: Array) -> tuple[Array, Array] | None:
+        """The link axes ``(n_o, d)``, ``(n_o, d)`` of the fingers checked against ``finger`` at the
+        hand configuration ``q``, stacked in :attr:`_FingerData.stacked` order (cached by ``q``: a
+        transfer asks for them at every check); ``None`` without such fingers."""
+        others = self._cache.get(("others", finger))
+        if others is None:
+            others = self._cache[("others", finger)] = [
+                k for k in range(len(self.hand.fingers))
+                if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
+        if not others:
+            return None
+        key = ("stacked", finger, np.asarray(q, dtype=float).tobytes())
+        got = self._cache.get(key)
+        if got is None:
+            if len(self._cache) > 4096:
+                for k in [k for k in self._cache if k[0] in ("segs", "stacked")]:
+                    del self._cache[k]
+            segs = [self._segments_cached(k, q) for k in others]
+            got = self._cache[key] = (np.concatenate([sg[0] for sg in segs]), np.concatenate([sg[1] for sg in segs]))
+        return got
 
     def clearances_along(
         self,
@@ -518,6 +606,32 @@ class CollisionModel:
         and the object at ``positions[k]`` ``(N, d)``, ``rotations[k]`` ``(N, 3, 3)`` (every joint and
         the object move, as along an object motion); returns ``(N,)``, equal to one state at a time
         bit for bit (as :meth:`finger_clearances`, which keeps the other joints and the object still)."""
+        return self._clearances_along(finger, Q, positions, rotations, allowance, touching, None)
+
+    def clear_along(
+        self,
+        finger: int,
+        Q: Array,
+        positions: Array,
+        rotations: Array,
+        allowance: Array | None = None,
+        touching: Sequence[BodyRef] = (),
+        floor: float = 0.0,
+    ) -> Array:
+        """``clearances_along(...) >= floor`` ``(N,)`` bool, exactly, with the blocks culled against
+        ``floor`` (as :meth:`clear_many`)."""
+        return self._clearances_along(finger, Q, positions, rotations, allowance, touching, floor) >= floor
+
+    def _clearances_along(
+        self,
+        finger: int,
+        Q: Array,
+        positions: Array,
+        rotations: Array,
+        allowance: Array | None,
+        touching: Sequence[BodyRef],
+        floor: float | None,
+    ) -> Array:
         fd = self._finger_data(finger)
         Q = np.asarray(Q, dtype=float)
         N = Q.shape[0]
@@ -534,7 +648,7 @@ class CollisionModel:
         od = _shape_segments_distance(self.scene.object.shape, ((A - pos) @ R).reshape(N * n, d),
                                       ((B - pos) @ R).reshape(N * n, d), d, self.sample_step).reshape(N, n)
         segs = [self._segment_arrays_many(k, Q[:, self.hand.finger_slice(k)]) for k in others]
-        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching)
+        return self._clearances_min(fd, finger, A, B, od, segs, allowance, touching, floor)
 
     def batched(self, finger: int) -> bool:
         """Whether :meth:`clearances_along` evaluates ``finger``'s states in one pass (a capsule
@@ -557,11 +671,21 @@ class CollisionModel:
         segs: list[tuple[Array, Array]],
         allowance: Array | None,
         touching: Sequence[BodyRef],
+        floor: float | Array | None = None,
+        exact_below: bool = False,
     ) -> Array:
         """The minimum of ``terms - allowance`` per state of :meth:`finger_clearances` and
         :meth:`clearances_along`: the finger's link axes ``A``, ``B`` ``(N, n, d)``, their distances
         ``od`` ``(N, n)`` to the object, the link axes ``(N, n_k, d)`` of each finger checked against
-        it; own and other pairs and fixed bodies culled by their lower bounds."""
+        it; own and other pairs and fixed bodies culled by their lower bounds.
+
+        ``floor`` (:meth:`clear_many`): only whether each minimum is ``>= floor`` is wanted, so a
+        block is evaluated only where a lower bound of one of its terms is below ``floor`` and the
+        state's minimum so far is not yet below it (instead of below the minimum so far); the
+        values returned are then on the same side of ``floor`` as the true minima, not their value.
+        With ``exact_below`` (:meth:`clearances_below`) a block is evaluated where a bound is below
+        both the floor and the minimum so far: the values below the floor are exact, the others at
+        least the floor."""
         N, n, d = A.shape
         Af, Bf = A.reshape(N * n, d), B.reshape(N * n, d)  # (N n, d)
         if allowance is None:
@@ -579,6 +703,8 @@ class CollisionModel:
         else:
             obj = od - fd.r_infl - al[:n]
         best = obj.min(axis=1)  # (N,) the minimum so far, as in _capsule_clearance_min
+        if floor is not None and not exact_below and bool((best < floor).all()):  # all already below
+            return np.asarray(best)
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):  # own non-adjacent pairs, then the links of the fingers checked against this one
             S0, S1 = A, B
@@ -592,13 +718,14 @@ class CollisionModel:
             Mid = 0.5 * (S0 + S1)  # (N, n_s, d)
             gap = Mid[:, i] - Mid[:, j]  # (N, p, d)
             bound = np.sqrt((gap * gap).sum(axis=2)) - fd.pair_half - fd.pair_radii - al[2 * n:]  # (N, p)
-            need = (bound - 1e-9 < best[:, None]).reshape(N * p)
+            need = (bound - 1e-9 < self._cut(best, floor, exact_below)[:, None]).reshape(N * p)
             if need.any():
                 pd = np.full(N * p, np.inf)
                 pd[need] = segment_segment_distances(S0[:, i].reshape(N * p, d)[need], S1[:, i].reshape(N * p, d)[need],
                                                      S0[:, j].reshape(N * p, d)[need], S1[:, j].reshape(N * p, d)[need])
                 best = np.minimum(best, (pd.reshape(N, p) - fd.pair_radii - al[2 * n:]).min(axis=1))
-        if fd.any_fixed:  # the fixed bodies, only for the links whose lower bound is below `best`
+        # the fixed bodies, only for the links whose lower bound is below `best` (or `floor`: not once all are below)
+        if fd.any_fixed and not (floor is not None and not exact_below and bool((best < floor).all())):
             tiles = self._cache.get(("tiles", finger, N))
             if tiles is None:
                 tiles = self._cache[("tiles", finger, N)] = (np.tile(fd.r_infl, N), np.tile(fd.fixed_checked, N))
@@ -615,7 +742,8 @@ class CollisionModel:
                 lb = shape_signed_distances(bodies[0].shape, C, d) - half
                 for fb in bodies[1:]:
                     lb = np.minimum(lb, shape_signed_distances(fb.shape, C, d) - half)
-                need = checked & ((lb.reshape(N, n) - fd.r_infl - al_f - 1e-9) < best[:, None]).reshape(N * n)
+                need = checked & ((lb.reshape(N, n) - fd.r_infl - al_f - 1e-9)
+                                  < self._cut(best, floor, exact_below)[:, None]).reshape(N * n)
             if need.any():
                 # sampled as the whole block would be: the sample count from the longest link
                 length = float(2.0 * half.max())
@@ -627,6 +755,18 @@ class CollisionModel:
                 fixed[need] = dist - r_all[need] - al_f[np.flatnonzero(need) % n]
                 best = np.minimum(best, fixed.reshape(N, n).min(axis=1))
         return np.asarray(best)
+
+    @staticmethod
+    def _cut(best: Array, floor: float | Array | None, exact_below: bool = False) -> Array:
+        """The value ``(N,)`` below which a lower bound makes a block worth evaluating: the minimum
+        so far; with a ``floor``, the floor where the minimum so far is not below it (a term surely
+        above the floor cannot change the answer) and ``-inf`` where it is (the answer is known);
+        ``exact_below``: the smaller of the floor and the minimum so far (exact below the floor)."""
+        if floor is None:
+            return best
+        if exact_below:
+            return np.minimum(best, floor)
+        return np.where(best < floor, -np.inf, floor)
 
     @functools.cached_property
     def _fixed_bounded(self) -> bool:
@@ -653,12 +793,13 @@ class CollisionModel:
         Rot = _EYE3 + S[:, :, None, None] * K[0] + C[:, :, None, None] * K[1]  # (N, n, 3, 3) joint rotations
         R = chain.base_R  # (3, 3), then (N, 3, 3) once the first joint turns
         p = chain.base_p + R @ chain.origins[0]  # (3,), then (N, 3)
+        A[:, 0] = p
         for k in range(n):
             R = R @ Rot[:, k]
             end = chain.origins[k + 1] if k + 1 < n else chain.tip
-            A[:, k] = p
             p = p + R @ end  # the end of link k is the origin of joint k + 1
             B[:, k] = p
+        A[:, 1:] = B[:, :-1]
         return A[:, :, :d], B[:, :, :d]
 
     def _capsule_clearance_min(
@@ -670,13 +811,16 @@ class CollisionModel:
         rotation: Array,
         touching: Sequence[BodyRef],
         allowance: Array | None,
+        floor: float | None = None,
     ) -> float:
         """``min(clearance_terms - allowance)`` of a capsule finger, bit for bit: the object terms
         first, then a block (own/other link pairs, fixed bodies) only where a lower bound of one of
         its terms is below the minimum so far. The bounds use that a distance function is
         1-Lipschitz: a segment of length ``L`` and midpoint ``c`` is at least ``dist(c) - L/2``
         from a convex body, two segments at least ``|c_a - c_b| - (L_a + L_b)/2`` apart (the
-        sampled box distances are never below the exact ones)."""
+        sampled box distances are never below the exact ones). ``floor`` (:meth:`is_clear`): a value
+        on the same side of ``floor`` as the minimum only (blocks culled against ``floor``, none once
+        below it)."""
         n = len(fd.refs)
         d = self.scene.dim
         A, B = self.segment_arrays(finger, q)  # (n, d), (n, d)
@@ -693,6 +837,8 @@ class CollisionModel:
             obj = obj - al[:n]
         best = float(obj.min()) if n else float(np.inf)
         margin = 1e-9  # the bounds' rounding, far above it
+        if floor is not None and best < floor:
+            return best
         i, j = fd.pairs[:, 0], fd.pairs[:, 1]
         if len(i):
             others = [k for k in range(len(self.hand.fingers))
@@ -709,12 +855,14 @@ class CollisionModel:
             bound = np.sqrt((mid * mid).sum(axis=1)) - half - fd.pair_radii  # (p,) <= the terms
             if al is not None:
                 bound = bound - al[2 * n:]
-            need = bound - margin < best
+            need = bound - margin < (best if floor is None else floor)
             if need.any():
                 pd = segment_segment_distances(P0[need], P1[need], Q0[need], Q1[need]) - fd.pair_radii[need]
                 if al is not None:
                     pd = pd - al[2 * n:][need]
                 best = min(best, float(pd.min()))
+        if floor is not None and best < floor:
+            return best
         if fd.any_fixed:
             A2, skip = _trimmed_at_base(A, B, fd.base, fd.r_infl)
             checked = fd.fixed_checked & ~skip
@@ -729,7 +877,7 @@ class CollisionModel:
                     for fb in self.scene.fixed_bodies:
                         lb = np.minimum(lb, shape_signed_distances(fb.shape, C, d) - half_f)
                     lb = lb - fd.r_infl - al_f
-                    do = bool(np.any(lb[checked] - margin < best))
+                    do = bool(np.any(lb[checked] - margin < (best if floor is None else floor)))
                 else:
                     do = True
                 if do:  # the block exactly as clearance_terms evaluates it
@@ -863,7 +1011,7 @@ class CollisionModel:
         got = self._cache.get(key)
         if got is None:
             if len(self._cache) > 4096:
-                for k in [k for k in self._cache if k[0] == "segs"]:
+                for k in [k for k in self._cache if k[0] in ("segs", "stacked")]:
                     del self._cache[k]
             got = self.segment_arrays(finger, q)
             self._cache[key] = got
@@ -1011,8 +1159,10 @@ def path_clearance_certified(
         L = float(np.linalg.norm(p1 - p0))
 
         def clear(t: Array, p0: Array = p0, p1: Array = p1, L: float = L,
-                  touching: Sequence[BodyRef] = touching) -> Array:
+                  touching: Sequence[BodyRef] = touching, floors: Array | None = None) -> Array:
             X = p0[None, :] + (p1 - p0)[None, :] * (t / L if L > 0 else 0.0 * t)[:, None]  # (k, m)
+            if floors is not None:
+                return model.clearances_below(finger, q, X, floors, position, rotation, allowance, touching)
             return model.finger_clearances(finger, q, X, position, rotation, allowance, touching)
 
         ends = np.array([0.0, L]) if L > 0 else np.zeros(1)
@@ -1030,7 +1180,11 @@ def path_clearance_certified(
                 break
             ta, tb, ca, cb = ta[open_], tb[open_], ca[open_], cb[open_]
             tm = 0.5 * (ta + tb)
-            cm = clear(tm)
+            # a middle clearance at least `floor` leaves `worst` as it is and certifies both halves
+            # (ca + cm >= K (tm - ta), cm + cb >= K (tb - tm), 1e-9 above the sums' rounding):
+            # its exact value is needed only below it (CollisionModel.clearances_below)
+            floor = np.maximum(np.maximum(K * (tm - ta) - ca, K * (tb - tm) - cb) + 1e-9, worst)
+            cm = clear(tm, floors=floor)
             checks += len(cm)
             worst = min(worst, float(cm.min()))
             if worst < 0.0:

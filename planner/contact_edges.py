@@ -146,7 +146,7 @@ def contact_edges(nodes: GraphNodes, state: GraspState) -> list[Successor]:
                 for x in sols:  # the contact configuration itself must be collision-free
                     q_try = state.q.copy()
                     q_try[sl] = x
-                    if model.finger_clearance(f, q_try, state.position, state.rotation, [tip_ref], allow) >= 0.0:
+                    if model.is_clear(f, q_try, state.position, state.rotation, [tip_ref], allow):
                         valid.append(x)
             if not valid:
                 nodes.reject("no collision-free inverse-kinematics solution for a new contact")

@@ -172,14 +172,14 @@ class _MotionCheck:
             qf = q[hand.finger_slice(f)]
             if np.any(qf < self.limits[f][0] - 1e-9) or np.any(qf > self.limits[f][1] + 1e-9):
                 return False
-            if self.model.finger_clearance(f, q, position, rotation, self.touching[f], self.allow[f]) < -1e-9:
+            if not self.model.is_clear(f, q, position, rotation, self.touching[f], self.allow[f], -1e-9):
                 return False
         return self.model.object_clearance(position, rotation) >= self.object_floor
 
     def all_valid(self, Q: Array, poses: Sequence[Pose]) -> bool:
         """Whether :meth:`__call__` holds at every hand configuration of ``Q`` ``(N, M)`` with the
         object at ``poses``: the joint limits, then the clearances of the fingers that
-        :meth:`CollisionModel.clearances_along` checks in one pass (all the states at once, equal to
+        :meth:`CollisionModel.clear_along` checks in one pass (all the states at once, equal to
         one at a time), then the other fingers and the object state by state; the first violation
         ends it (the answer is the same as checking state after state)."""
         hand, model = self.model.hand, self.model
@@ -194,13 +194,13 @@ class _MotionCheck:
             positions = np.array([p.position for p in poses]).reshape(len(poses), -1)  # (N, d)
             rotations = np.array([p.rotation for p in poses]).reshape(len(poses), 3, 3)  # (N, 3, 3)
             for f in batched:
-                if not bool(np.all(model.clearances_along(f, Q, positions, rotations, self.allow[f],
-                                                          self.touching[f]) >= -1e-9)):
+                if not bool(np.all(model.clear_along(f, Q, positions, rotations, self.allow[f], self.touching[f],
+                                                     -1e-9))):
                     return False
         for q, pose in zip(Q, poses, strict=True):
             for f in F:
-                if f not in batched and model.finger_clearance(f, q, pose.position, pose.rotation, self.touching[f],
-                                                               self.allow[f]) < -1e-9:
+                if f not in batched and not model.is_clear(f, q, pose.position, pose.rotation, self.touching[f],
+                                                           self.allow[f], -1e-9):
                     return False
             if model.object_clearance(pose.position, pose.rotation) < self.object_floor:
                 return False

@@ -108,15 +108,19 @@ def plan_transfer(
             return False
         qq = q_full.copy()
         qq[sl] = x
-        return model.finger_clearance(finger, qq, pos, rot, (), allow) >= 0.0
+        return model.is_clear(finger, qq, pos, rot, (), allow)
 
     lo_tol, hi_tol = j_lo - 1e-9, j_hi + 1e-9
 
+    bounded = bool(np.isfinite(j_lo).any() or np.isfinite(j_hi).any())
+
     def valid_many(rows: Array) -> Array:  # (N, m) -> (N,) bool: valid_q of each row
+        if not bounded:  # a scene chain without limits: every row is inside (a NaN row fails the clearance, NaN >= 0)
+            return np.asarray(model.clear_many(finger, q_full, rows, pos, rot, allow))
         inside = np.all((rows >= lo_tol) & (rows <= hi_tol), axis=1)
         out = np.zeros(len(rows), dtype=bool)
         if inside.any():
-            out[inside] = model.finger_clearances(finger, q_full, rows[inside], pos, rot, allow) >= 0.0
+            out[inside] = model.clear_many(finger, q_full, rows[inside], pos, rot, allow)
         return out
 
     if not valid_q(start):
@@ -210,7 +214,9 @@ class _SegmentValidator(ob.MotionValidator):
         b = np.array([s2[j] for j in range(m)])
         nd = int(self._space.validSegmentCount(s1, s2))
         T = _bisection_order(nd) / float(nd)  # (nd - 1,)
-        X = np.vstack([b[None, :], a[None, :] + (b - a)[None, :] * T[:, None]])  # (nd, m): end first
+        X = np.empty((nd, m))  # end first
+        X[0] = b
+        X[1:] = a[None, :] + (b - a)[None, :] * T[:, None]
         ok = self._valid_many(X)
         bad = np.flatnonzero(~ok)
         used = len(X) if not len(bad) else int(bad[0]) + 1

@@ -157,3 +157,126 @@ def test_clearances_along_a_path_equal_one_state_at_a_time(name: str) -> None:
             verdicts |= set((got >= 0.0).tolist())
     if name not in ("baxter_hug_box", "panda_forearm_box"):
         assert verdicts == {True, False}
+
+
+@pytest.mark.parametrize("name", ["sphere_four_finger_palm", "planar_disk_envelope", "sphere_four_finger_wrap",
+                                  "baxter_hug_box"])
+def test_sign_only_checks_equal_the_clearance_sign(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``clear_many``, ``clear_along`` and ``is_clear`` (validity checks: blocks culled against a
+    floor, not against the minimum so far) answer ``finger_clearance(...) >= floor`` exactly, with
+    and without an allowance and touching links, at configurations about the start where both
+    verdicts occur (floors 0, -1e-9 as object motions use, -0.01, 0.02; along a path the object
+    moves too); on the capsule scenes they evaluate fewer pair and fixed-body blocks than the
+    exact minimum."""
+    scene = load_scene(ROOT / "examples" / f"{name}.json")
+    hand = HandKinematics.from_scene(scene)
+    model = CollisionModel.of(scene, hand)
+    pos = np.asarray(scene.object.pose.position, dtype=float)
+    rot = Rotation.from_rotvec([0.0, 0.0, 0.05]).as_matrix() if scene.dim == 3 else np.eye(3)
+    rng = np.random.default_rng(5)
+    rows = {"n": 0}
+    orig_box, orig_seg = collision_mod._shape_segments_distance, collision_mod.segment_segment_distances
+
+    def box(*a: object, **k: object) -> np.ndarray:
+        rows["n"] += len(a[1])  # type: ignore[arg-type]
+        return orig_box(*a, **k)  # type: ignore[arg-type]
+
+    def seg(*a: np.ndarray) -> np.ndarray:
+        rows["n"] += len(a[0])
+        return orig_seg(*a)
+
+    monkeypatch.setattr(collision_mod, "_shape_segments_distance", box)
+    monkeypatch.setattr(collision_mod, "segment_segment_distances", seg)
+    verdicts = set()
+    exact_rows = sign_rows = 0
+    for f in range(len(hand.fingers)):
+        sl = hand.finger_slice(f)
+        chain = hand.fingers[f]
+        tip = BodyRef(f"{chain.name}/{chain.n_joints - 1}", f, chain.n_joints - 1)
+        X = hand.q0[sl] + rng.normal(0.0, 1.2, (60 if name != "baxter_hug_box" else 4, sl.stop - sl.start))
+        allow = np.minimum(0.0, rng.normal(0.0, 0.01, model.clearance_terms(f, hand.q0, pos, rot).size))
+        for al, touching in ((None, ()), (allow, ()), (allow, (tip,))):
+            rows["n"] = 0
+            want = model.finger_clearances(f, hand.q0, X, pos, rot, al, touching) >= 0.0
+            exact_rows += rows["n"]
+            rows["n"] = 0
+            got = model.clear_many(f, hand.q0, X, pos, rot, al, touching)
+            sign_rows += rows["n"]
+            np.testing.assert_array_equal(got, want)
+            q = hand.q0.copy()
+            for x, w in zip(X, want, strict=True):
+                q[sl] = x
+                assert model.is_clear(f, q, pos, rot, touching, al) == bool(w)
+                assert bool(w) == (model.finger_clearance(f, q, pos, rot, touching, al) >= 0.0)
+            verdicts |= set(want.tolist())
+            # another floor (object motions accept -1e-9), and along a path where the object moves too
+            values = model.finger_clearances(f, hand.q0, X, pos, rot, al, touching)
+            for floor in (-1e-9, -0.01, 0.02):
+                np.testing.assert_array_equal(model.clear_many(f, hand.q0, X, pos, rot, al, touching, floor),
+                                              values >= floor)
+            Q = np.tile(hand.q0, (len(X), 1))
+            Q[:, sl] = X
+            positions = pos[None, :] + rng.normal(0.0, 0.05, (len(X), len(pos)))
+            rotations = np.repeat(rot[None], len(X), axis=0)
+            along = model.clearances_along(f, Q, positions, rotations, al, touching)
+            for floor in (0.0, -1e-9, -0.01):
+                np.testing.assert_array_equal(model.clear_along(f, Q, positions, rotations, al, touching, floor),
+                                              along >= floor)
+                for k in range(0, len(X), 7):
+                    got_k = model.is_clear(f, Q[k], positions[k], rotations[k], touching, al, floor)
+                    assert got_k == (along[k] >= floor)
+    if name != "baxter_hug_box":  # (its arms press on the box about q0: all in contact)
+        assert verdicts == {True, False}
+        assert sign_rows < exact_rows
+
+
+@pytest.mark.parametrize("name", ["sphere_four_finger_palm", "planar_disk_envelope", "sphere_four_finger_wrap"])
+def test_clearances_below_floors_and_the_certificate(name: str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``clearances_below`` is ``finger_clearances`` bit for bit where that is below the floor, and at
+    least the floor elsewhere; ``path_clearance_certified``, which asks for its middle clearances
+    only below the floor that decides the two halves, answers as with every value exact (the same
+    verdict, smallest clearance and number of checks) on random paths of each finger."""
+    scene = load_scene(ROOT / "examples" / f"{name}.json")
+    hand = HandKinematics.from_scene(scene)
+    model = CollisionModel.of(scene, hand)
+    pos = np.asarray(scene.object.pose.position, dtype=float)
+    rot = np.eye(3)
+    rng = np.random.default_rng(9)
+    for f in range(len(hand.fingers)):
+        sl = hand.finger_slice(f)
+        X = hand.q0[sl] + rng.normal(0.0, 1.0, (50, sl.stop - sl.start))
+        exact = model.finger_clearances(f, hand.q0, X, pos, rot)
+        floors = rng.uniform(-0.1, 0.4, 50)
+        got = model.clearances_below(f, hand.q0, X, floors, pos, rot)
+        below = exact < floors
+        assert below.any() and (~below).any()
+        np.testing.assert_array_equal(got[below], exact[below])
+        assert np.all(got[~below] >= floors[~below]) and np.all(got >= exact)
+    results = []
+    for f in range(len(hand.fingers)):
+        sl = hand.finger_slice(f)
+        chain = hand.fingers[f]
+        tip = BodyRef(f"{chain.name}/{chain.n_joints - 1}", f, chain.n_joints - 1)
+        for _ in range(6):
+            path = hand.q0[sl] + np.cumsum(rng.normal(0.0, 0.15, (4, sl.stop - sl.start)), axis=0)
+            path[0] = hand.q0[sl]
+            results.append(collision_mod.path_clearance_certified(model, f, hand.q0, path, pos, rot, [tip], 2))
+    with monkeypatch.context() as m:  # every middle clearance exact
+        m.setattr(CollisionModel, "clearances_below",
+                  lambda self, finger, q, X, floors, *a: self.finger_clearances(finger, q, X, *a))
+        rng = np.random.default_rng(9)
+        for f in range(len(hand.fingers)):  # the same random stream as above
+            sl = hand.finger_slice(f)
+            rng.normal(0.0, 1.0, (50, sl.stop - sl.start))
+            rng.uniform(-0.1, 0.4, 50)
+        k = 0
+        for f in range(len(hand.fingers)):
+            sl = hand.finger_slice(f)
+            chain = hand.fingers[f]
+            tip = BodyRef(f"{chain.name}/{chain.n_joints - 1}", f, chain.n_joints - 1)
+            for _ in range(6):
+                path = hand.q0[sl] + np.cumsum(rng.normal(0.0, 0.15, (4, sl.stop - sl.start)), axis=0)
+                path[0] = hand.q0[sl]
+                assert collision_mod.path_clearance_certified(model, f, hand.q0, path, pos, rot, [tip], 2) == results[k]
+                k += 1
+    assert {ok for ok, _, _ in results} == {True, False}
