@@ -12,6 +12,7 @@ pointing into the object (``link direction . normal >= min_alignment``):
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from collections.abc import Sequence
 from typing import Any
 
@@ -35,7 +36,10 @@ def _chain_tip_symbolic(chain: SerialChain, q: Any) -> tuple[Any, Any]:
     return tip, R @ ca.DM(chain.tip / max(float(np.linalg.norm(chain.tip)), 1e-12))
 
 
-_IK_SOLVERS: dict[int, tuple[SerialChain, Any]] = {}
+#: IPOPT problems by the chain's geometry and the dimension (:func:`_ik_key`), least recently used
+#: first; bounded, so a long-running service that plans on many scenes does not keep them all
+_IK_SOLVERS: OrderedDict[tuple[bytes, ...], Any] = OrderedDict()
+_IK_SOLVERS_MAX = 64
 #: IPOPT iterations of one IK solve (:func:`_ik_solver`)
 IK_MAX_ITER = 60
 
@@ -43,9 +47,11 @@ IK_MAX_ITER = 60
 def _ik_solver(chain: SerialChain, dim: int) -> Any:
     """The CasADi/IPOPT problem of :func:`fingertip_ik` for one chain (built once, parametric in the
     seed, the target and the normal)."""
-    got = _IK_SOLVERS.get(id(chain))
-    if got is not None and got[0] is chain:
-        return got[1]
+    key = _ik_key(chain, dim)
+    got = _IK_SOLVERS.get(key)
+    if got is not None:
+        _IK_SOLVERS.move_to_end(key)
+        return got
     n = chain.n_joints
     q = ca.SX.sym("q", n)
     tip, axis = _chain_tip_symbolic(chain, q)
@@ -59,8 +65,19 @@ def _ik_solver(chain: SerialChain, dim: int) -> Any:
     opts: dict[str, Any] = {"ipopt.print_level": 0, "print_time": False, "ipopt.max_iter": IK_MAX_ITER,
                             "ipopt.tol": 1e-10, "ipopt.sb": "yes"}
     solver = ca.nlpsol("ik", "ipopt", nlp, opts)
-    _IK_SOLVERS[id(chain)] = (chain, solver)
+    _IK_SOLVERS[key] = solver
+    while len(_IK_SOLVERS) > _IK_SOLVERS_MAX:
+        _IK_SOLVERS.popitem(last=False)
     return solver
+
+
+def _ik_key(chain: SerialChain, dim: int) -> tuple[bytes, ...]:
+    """What the IK problem of ``chain`` depends on: its base pose, joint axes and origins, tip and the
+    dimension, exactly (the bytes of the float64 arrays). Each plan builds its chains anew, so a key
+    by the object's identity rebuilt the problem for every plan (about 5 ms a finger) and kept every
+    chain alive."""
+    arrays = (chain.base_R, chain.base_p, chain.axes, chain.origins, chain.tip)
+    return (str(dim).encode(), *(np.ascontiguousarray(a, dtype=float).tobytes() for a in arrays))
 
 
 def alignment_bound(chain: SerialChain, target: Array) -> Array | None:

@@ -80,3 +80,25 @@ def test_targets_out_of_the_plane_bound_have_no_solution() -> None:
     axes[2] = [1.0, 0.0, 0.0]  # the third joint no longer parallel to the second
     bent = SerialChain(chain.name, chain.base_R, chain.base_p, axes, chain.origins, chain.tip, chain.radii, chain.q0)
     assert alignment_bound(bent, np.array([0.0, 0.0, 1.0])) is None
+
+
+def test_ik_problems_are_shared_by_equal_chains_and_bounded() -> None:
+    """The IPOPT problem is keyed by the chain's geometry: the same scene loaded twice (as every
+    plan does) reuses it, a chain with another joint origin gets its own, and the cache stays at
+    most ``_IK_SOLVERS_MAX`` problems however many chains are seen (no chain is kept alive)."""
+    from planner import ik
+
+    first, again = _palm_chain().fingers[0], _palm_chain().fingers[0]
+    assert first is not again
+    solver = ik._ik_solver(first, 3)
+    assert ik._ik_solver(again, 3) is solver
+    moved = SerialChain(first.name, first.base_R, first.base_p + np.array([0.0, 0.0, 1e-3]), first.axes,
+                        first.origins, first.tip, first.radii, first.q0)
+    assert ik._ik_solver(moved, 3) is not solver
+    assert ik._ik_solver(first, 2) is not solver  # the planar problem has other constraints
+    for k in range(ik._IK_SOLVERS_MAX + 3):  # about 5 ms each to build
+        other = SerialChain(first.name, first.base_R, first.base_p + np.array([k * 1e-3, 0.0, 0.0]), first.axes,
+                            first.origins, first.tip, first.radii, first.q0)
+        ik._ik_solver(other, 3)
+    assert len(ik._IK_SOLVERS) == ik._IK_SOLVERS_MAX
+    assert ik._ik_key(moved, 3) not in ik._IK_SOLVERS  # the least recently used went first
