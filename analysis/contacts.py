@@ -142,6 +142,29 @@ class GraspSystem:
     def frictional(self) -> NDArray[np.bool_]:
         return self.mu > 0.0
 
+    def joint_groups(self) -> list[tuple[list[int], list[int]]]:
+        """Contacts linked by shared joints: the connected components ``(C, Q)`` of the contacts
+        whose ``J_ij`` blocks have a nonzero column in common, each with the sorted joints its
+        contacts use (a contact on a fixed body is a group of its own with no joints)."""
+        L = self.L
+        uses = [set(np.flatnonzero(np.any(self.J_blocks[i] != 0.0, axis=0)).tolist()) for i in range(L)]
+        parent = list(range(L))
+
+        def find(a: int) -> int:
+            while parent[a] != a:
+                parent[a] = parent[parent[a]]
+                a = parent[a]
+            return a
+
+        for a in range(L):
+            for b in range(a + 1, L):
+                if uses[a] & uses[b]:
+                    parent[find(a)] = find(b)
+        groups: dict[int, list[int]] = {}
+        for a in range(L):
+            groups.setdefault(find(a), []).append(a)
+        return [(C, sorted(set().union(*(uses[i] for i in C)))) for C in groups.values()]
+
 
 def system_from_arrays(
     points: Array,

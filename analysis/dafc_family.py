@@ -215,23 +215,7 @@ class FamilyKinematics:
         facets = system.pyramid[0]
         self.facets = [snap(facets[i] / np.linalg.norm(facets[i], axis=1, keepdims=True)) for i in range(L)]
         self.grip_normals = np.array([snap(system.normals[i]) for i in range(L)]).reshape(L, system.d)
-        uses = [set(np.flatnonzero(np.any(system.J_blocks[i] != 0.0, axis=0)).tolist()) for i in range(L)]
-        parent = list(range(L))
-
-        def find(a: int) -> int:
-            while parent[a] != a:
-                parent[a] = parent[parent[a]]
-                a = parent[a]
-            return a
-
-        for a in range(L):
-            for b in range(a + 1, L):
-                if uses[a] & uses[b]:
-                    parent[find(a)] = find(b)
-        groups: dict[int, list[int]] = {}
-        for a in range(L):
-            groups.setdefault(find(a), []).append(a)
-        self.groups = [(C, sorted(set().union(*(uses[i] for i in C)))) for C in groups.values()]
+        self.groups = system.joint_groups()
         self.M = M
         self._cache: dict[tuple[int, str, tuple[int, ...]], Array | None] = {}
 

@@ -605,26 +605,9 @@ def _free_contacts(system: GraspSystem, tol: ModeTolerances) -> tuple[list[int],
     L, M = system.L, system.M
     if M == 0 or L == 0:
         return [], []
-    uses = [set(np.flatnonzero(np.any(system.J_blocks[i] != 0.0, axis=0)).tolist()) for i in range(L)]
-    parent = list(range(L))
-
-    def find(a: int) -> int:
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
-    for a in range(L):
-        for b in range(a + 1, L):
-            if uses[a] & uses[b]:
-                parent[find(a)] = find(b)
-    groups: dict[int, list[int]] = {}
-    for a in range(L):
-        groups.setdefault(find(a), []).append(a)
     free_c: list[int] = []
     free_q: list[int] = []
-    for C in groups.values():
-        Q = sorted(set().union(*(uses[i] for i in C)))
+    for C, Q in system.joint_groups():
         if not Q or len(Q) < system.d * len(C):
             continue
         JCQ = np.vstack([system.J_blocks[i][:, Q] for i in C])  # (d |C|, |Q|)
