@@ -277,6 +277,12 @@ class LPModel:
         self.lb, self.ub = self.lb.copy(), self.ub.copy()
         self.lb[int(j)], self.ub[int(j)] = lo, up
 
+    def set_bounds(self, lb: Array | float | None, ub: Array | float | None) -> None:
+        """New bounds of every column (as the constructor takes them; warm start kept)."""
+        lo, up = _bounds(lb, self.n, -INF), _bounds(ub, self.n, INF)
+        self._h.changeColsBounds(self.n, self._idx, lo, up)
+        self.lb, self.ub = lo, up
+
     def set_eq_rhs(self, b_eq: Array) -> None:
         """New right-hand side of the equality rows (warm start kept)."""
         b = np.asarray(b_eq, dtype=float).ravel()
