@@ -383,7 +383,7 @@ def _load(
     callbacks for interrupts, a third of a small model's load time; no callback is used here),
     and the model is passed as arrays (one call) rather than through a ``HighsLp`` whose
     attributes are copied one by one: the same model, the same solves (identical points, duals
-    and iteration counts on random and degenerate LPs, ``tests/analysis/test_highs_adapter.py``)."""
+    and iteration counts on random and degenerate LPs, ``tests/analysis/test_solvers.py``)."""
     m, n = A.shape
     h = _Highs()
     h.setOptionValue("output_flag", False)
