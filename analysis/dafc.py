@@ -962,7 +962,7 @@ def _box_vertex(store: dict[str, object], c: Array) -> Array | None:
     optimum ``x'`` meets each row with ``y_i > 0`` with equality (else ``c^T x' < c^T x``), and
     those equations determine ``x' = x``. A vertex that is degenerate (more active rows than
     unknowns, as at a contact carrying no force) is certified as well. An LP solved from scratch
-    returns that same point, so the search does not depend on whether it was solved."""
+    returns that same point (to rounding), so the search does not depend on whether it was solved."""
     X = store.get("X")
     if not isinstance(X, np.ndarray):
         return None
@@ -1047,7 +1047,8 @@ def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector,
     The LP's matrix depends on the box only (the object direction ``u`` and the targets enter its
     right-hand side and the bounds of ``z``): ``store``, a dict the caller keeps for one box (same
     ``dep``, ``box``), holds the model for its later calls, which change those and solve from
-    scratch, as a new model would."""
+    scratch: the optimum of a new model, to rounding (HiGHS keeps some state of a model across a
+    cold start, so the last bits of the point may differ; test_solvers checks it)."""
     ms, sy, sel = oracle.ms, oracle.system, oracle.sel
     a_bar, nr, d = ms.a_bar, ms.n_redundant, sy.d
     scale = max(1.0, float(np.linalg.norm(ms.Lambda_q_t @ u)))

@@ -280,3 +280,26 @@ def test_lp_model_loads_the_same_model_as_highs_lp(seed):
             continue
         assert res.x is not None and res.y_ub is not None and res.z is not None
         assert np.array_equal(res.x, x) and np.array_equal(res.y_ub, -y) and np.array_equal(res.z, -z)
+
+
+def test_set_bounds_then_cold_solve_equals_a_new_model():
+    """``set_bounds`` + ``set_ub_rhs`` + ``solve_cold`` on a kept model (the slip-sector search's
+    motion LP) gives what a new model with those data gives: the same vertex, to rounding (HiGHS
+    keeps some state of the model across ``clearSolver``, so the last bits may differ)."""
+    rng = np.random.default_rng(5)
+    A = rng.standard_normal((12, 6))
+    kept = LPModel(6, A_ub=A, b_ub=np.ones(12), lb=-1.0, ub=1.0)
+    kept.solve_cold(rng.standard_normal(6))
+    for _ in range(10):
+        b, lim, c = np.abs(rng.standard_normal(12)), float(rng.uniform(0.5, 3.0)), rng.standard_normal(6)
+        lb = np.r_[np.full(3, -lim), np.zeros(3)]
+        ub = np.r_[np.full(3, lim), np.full(3, np.inf)]
+        kept.set_ub_rhs(b)
+        kept.set_bounds(lb, ub)
+        again = kept.solve_cold(c)
+        fresh = LPModel(6, A_ub=A, b_ub=b, lb=lb, ub=ub).solve_cold(c)
+        assert again.status == fresh.status == "optimal"
+        assert again.x is not None and fresh.x is not None
+        np.testing.assert_allclose(again.x, fresh.x, rtol=0.0, atol=1e-13)
+        assert again.problem is not None and np.array_equal(again.problem.ub, fresh.problem.ub)  # type: ignore[union-attr]
+        assert np.all(again.x[:3] <= lim) and np.all(again.x[3:] >= 0.0)
