@@ -409,8 +409,9 @@ class DAFCOracle:
         return self._work_sup(dr, zeta_c, witness)
 
     def _work_sup(self, dr: Array, zeta_c: Array, witness: bool,
-                  planar: tuple[Array, Array, bytes] | None = None) -> tuple[float, Array | None]:
-        """:meth:`work_sup`; ``planar``: the motion's :meth:`_planar_friction`, when known."""
+                  planar: tuple[Array, Array, bytes] | None = None, keep: bool = True) -> tuple[float, Array | None]:
+        """:meth:`work_sup`; ``planar``: the motion's :meth:`_planar_friction`, when known;
+        ``keep``: store the optimal vertex for later objectives of the same rows (:meth:`_keep_vertex`)."""
         st = self.st
         w_ex = self.system.w_ex
         if st.G_c.shape[1] == 0:  # no contact carries force (all D): only w_ex can do work
@@ -452,7 +453,8 @@ class DAFCOracle:
         if res.status != "optimal":  # the grip bound bounds every force
             raise SolverError("HiGHS", f"DAFC force LP ended '{res.status}' although its forces are bounded")
         assert res.objective is not None and res.x is not None
-        self._keep_vertex(key, model, res.x)
+        if keep:
+            self._keep_vertex(key, model, res.x)
         f = res.x * self.system.scales.force
         return float(G_eff.T @ dr @ f + dr @ w_ex), f
 
@@ -585,7 +587,8 @@ class DAFCOracle:
     # -- membership -----------------------------------------------------------------------------
 
     def test(
-        self, dr: Array, zeta_r: Array | None = None, screen: bool = True, quick: bool = False, witness: bool = True
+        self, dr: Array, zeta_r: Array | None = None, screen: bool = True, quick: bool = False, witness: bool = True,
+        keep: bool = True,
     ) -> DirectionTest:
         """Is the object direction ``dr`` (any scale, in the motion space) in DAFC?
 
@@ -593,7 +596,9 @@ class DAFCOracle:
         (:meth:`relaxed_work_sup`), which is exact when it says no. ``quick``: when the slips
         depend on the redundancy, try only the friction-aligned and the least-L1 redundancies
         (not the seeded random ones). ``witness``: for an unbounded supremum, also return forces
-        with positive work (one more LP); sampling the set does without.
+        with positive work (one more LP); sampling the set does without. ``keep=False``: the force
+        LP's optimum is not stored for later directions (:meth:`_vertex_sup`), for motions that do
+        not recur (in 3-D the rows depend on the exact slips).
         """
         ms = self.ms
         dr = np.asarray(dr, dtype=float)
@@ -653,13 +658,13 @@ class DAFCOracle:
                     if key in answered:
                         sup, f = answered[key]
                     else:
-                        sup, f = self._work_sup(dr, zc, witness, friction)
+                        sup, f = self._work_sup(dr, zc, witness, friction, keep)
                         if not np.isnan(sup):  # an undecided LP is tried again (HiGHS' defaults) for the next
                             answered[key] = (sup, f)
                 else:
-                    sup, f = self._work_sup(dr, zc, witness)
+                    sup, f = self._work_sup(dr, zc, witness, keep=keep)
             else:
-                sup, f = self._work_sup(dr, zc, witness)
+                sup, f = self._work_sup(dr, zc, witness, keep=keep)
             if np.isnan(sup):
                 last = DirectionTest(dr, u, zc, False, np.nan, "degenerate: the force LP is numerically undecided",
                                      False)
@@ -1226,7 +1231,9 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
             nu = float(np.linalg.norm(zc[:a_bar]))
             if nu <= 1e-9:
                 continue
-            t = oracle.test(ms.Lambda_r_t @ (zc[:a_bar] / nu), zeta_r=zc[a_bar:] / nu, screen=False)
+            # in 3-D a candidate's force LP rows (its exact slips) recur for no later direction:
+            # its optimum is not stored (:meth:`DAFCOracle._keep_vertex`, an SVD each)
+            t = oracle.test(ms.Lambda_r_t @ (zc[:a_bar] / nu), zeta_r=zc[a_bar:] / nu, screen=False, keep=d == 2)
             if t.member:
                 dim = int(np.linalg.matrix_rank(U, tol=1e-9))
                 return SectorSearch(t, boxes, 0, float(bounds.max()), dim)
