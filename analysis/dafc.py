@@ -29,6 +29,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import nnls
 
 from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
@@ -224,6 +225,7 @@ class DAFCOracle:
         # with what certifies it optimal for another objective (:meth:`_vertex_sup`); None: infeasible
         self._vertices: dict[bytes, _VertexCache | None] = {}
         self.vertex_hits = 0  # force or relaxed LPs decided by a certified earlier vertex (no HiGHS call)
+        self.box_vertex_hits = 0  # slip-sector bounds decided by a certified earlier optimum (:func:`_box_vertex`)
         # planar S-points: the unit slip is +-t (the slip is tangential: the motion space keeps the
         # normal velocity zero), so the friction columns take one of 2^#S values, one per sign pattern
         self._T_s = (np.array([system.tangents[i][0] for i in sel.s_index]).reshape(-1, d) if d == 2
@@ -407,8 +409,9 @@ class DAFCOracle:
         return self._work_sup(dr, zeta_c, witness)
 
     def _work_sup(self, dr: Array, zeta_c: Array, witness: bool,
-                  planar: tuple[Array, Array, bytes] | None = None) -> tuple[float, Array | None]:
-        """:meth:`work_sup`; ``planar``: the motion's :meth:`_planar_friction`, when known."""
+                  planar: tuple[Array, Array, bytes] | None = None, keep: bool = True) -> tuple[float, Array | None]:
+        """:meth:`work_sup`; ``planar``: the motion's :meth:`_planar_friction`, when known;
+        ``keep``: store the optimal vertex for later objectives of the same rows (:meth:`_keep_vertex`)."""
         st = self.st
         w_ex = self.system.w_ex
         if st.G_c.shape[1] == 0:  # no contact carries force (all D): only w_ex can do work
@@ -450,7 +453,8 @@ class DAFCOracle:
         if res.status != "optimal":  # the grip bound bounds every force
             raise SolverError("HiGHS", f"DAFC force LP ended '{res.status}' although its forces are bounded")
         assert res.objective is not None and res.x is not None
-        self._keep_vertex(key, model, res.x)
+        if keep:
+            self._keep_vertex(key, model, res.x)
         f = res.x * self.system.scales.force
         return float(G_eff.T @ dr @ f + dr @ w_ex), f
 
@@ -583,7 +587,8 @@ class DAFCOracle:
     # -- membership -----------------------------------------------------------------------------
 
     def test(
-        self, dr: Array, zeta_r: Array | None = None, screen: bool = True, quick: bool = False, witness: bool = True
+        self, dr: Array, zeta_r: Array | None = None, screen: bool = True, quick: bool = False, witness: bool = True,
+        keep: bool = True,
     ) -> DirectionTest:
         """Is the object direction ``dr`` (any scale, in the motion space) in DAFC?
 
@@ -591,7 +596,9 @@ class DAFCOracle:
         (:meth:`relaxed_work_sup`), which is exact when it says no. ``quick``: when the slips
         depend on the redundancy, try only the friction-aligned and the least-L1 redundancies
         (not the seeded random ones). ``witness``: for an unbounded supremum, also return forces
-        with positive work (one more LP); sampling the set does without.
+        with positive work (one more LP); sampling the set does without. ``keep=False``: the force
+        LP's optimum is not stored for later directions (:meth:`_vertex_sup`), for motions that do
+        not recur (in 3-D the rows depend on the exact slips).
         """
         ms = self.ms
         dr = np.asarray(dr, dtype=float)
@@ -651,13 +658,13 @@ class DAFCOracle:
                     if key in answered:
                         sup, f = answered[key]
                     else:
-                        sup, f = self._work_sup(dr, zc, witness, friction)
+                        sup, f = self._work_sup(dr, zc, witness, friction, keep)
                         if not np.isnan(sup):  # an undecided LP is tried again (HiGHS' defaults) for the next
                             answered[key] = (sup, f)
                 else:
-                    sup, f = self._work_sup(dr, zc, witness)
+                    sup, f = self._work_sup(dr, zc, witness, keep=keep)
             else:
-                sup, f = self._work_sup(dr, zc, witness)
+                sup, f = self._work_sup(dr, zc, witness, keep=keep)
             if np.isnan(sup):
                 last = DirectionTest(dr, u, zc, False, np.nan, "degenerate: the force LP is numerically undecided",
                                      False)
@@ -909,6 +916,78 @@ def _relaxed_box_model(oracle: DAFCOracle, fixed_G: Array, dep: list[int], box: 
     return model, G, slots
 
 
+#: :func:`_relaxed_box_lp`: the least multiplier (relative to the objective) of an active
+#: inequality row by which an earlier optimum of the box's LP is certified the unique optimum for
+#: another direction (:func:`_box_vertex`).
+BOX_DUAL_MIN = 1e-7
+
+
+def _keep_box_vertex(store: dict[str, object], model: LPModel, x: Array) -> None:
+    """Keep the optimum ``x`` of the box's LP (units of the force scale) with its active rows, for
+    other objectives (:func:`_box_vertex`): the inequality rows and finite lower bounds within
+    :data:`VERTEX_ACTIVE_TOL` of their bound ``A_in`` ``(k, n)`` (a lower bound as ``-x_j <=
+    -lb_j``) and the equality rows ``A_eq``. Not kept when there are fewer of them than unknowns
+    (not a vertex; the rank is checked where it is used) or the point is known already."""
+    X = store.get("X")
+    if isinstance(X, np.ndarray) and (X.shape[0] >= VERTEX_POINTS
+                                      or bool(np.any(np.all(np.abs(X - x) <= 1e-12, axis=1)))):
+        return
+    n = model.n
+    slack = model.b_ub - model.A_ub @ x  # (m_ub,)
+    active = slack <= VERTEX_ACTIVE_TOL * np.maximum(1.0, np.abs(model.b_ub))
+    lo = np.isfinite(model.lb)
+    lb0 = np.where(lo, model.lb, 0.0)  # (n,)
+    at_lb = np.flatnonzero(lo & (x - lb0 <= VERTEX_ACTIVE_TOL * np.maximum(1.0, np.abs(lb0))))
+    bound_rows = np.zeros((len(at_lb), n))
+    bound_rows[np.arange(len(at_lb)), at_lb] = -1.0
+    A_in = np.vstack([model.A_ub[active], bound_rows])  # (k, n)
+    A_eq = model.A_eq  # (p, n)
+    if n == 0 or A_in.shape[0] + A_eq.shape[0] < n:
+        return  # fewer active rows than unknowns: not a vertex
+    entry = (A_in, A_eq, np.ascontiguousarray(np.vstack([A_in, A_eq, -A_eq]).T))  # last: (n, k + 2 p)
+    if isinstance(X, np.ndarray):
+        store["X"] = np.vstack([X, x[None, :]])
+        certs = store["certs"]
+        assert isinstance(certs, list)
+        certs.append(entry)
+    else:
+        store["X"], store["certs"] = x[None, :].copy(), [entry]
+
+
+def _box_vertex(store: dict[str, object], c: Array) -> Array | None:
+    """An earlier optimum of the box's LP that is the unique maximiser of ``c^T x``, or None.
+
+    The LP's rows do not depend on the objective (:func:`_relaxed_box_model`), so every earlier
+    optimum ``x`` is feasible. Only the one of largest ``c^T x`` can be optimal. It is when
+    multipliers ``y_in >= 0`` of its active inequality rows and ``y_eq`` of the equality rows give
+    ``A_in^T y_in + A_eq^T y_eq = c`` (non-negative least squares, residual within
+    :data:`VERTEX_DUAL_TOL` ``max(1, |c|)``): then ``c^T x' <= y_in^T b_in + y_eq^T b_eq = c^T x``
+    for every feasible ``x'`` (LP duality). It is the only optimum when the rows with ``y_i``
+    above :data:`BOX_DUAL_MIN` ``max(1, |c|)`` and the equality rows have full column rank: an
+    optimum ``x'`` meets each row with ``y_i > 0`` with equality (else ``c^T x' < c^T x``), and
+    those equations determine ``x' = x``. A vertex that is degenerate (more active rows than
+    unknowns, as at a contact carrying no force) is certified as well. An LP solved from scratch
+    returns that same point (to rounding), so the search does not depend on whether it was solved."""
+    X = store.get("X")
+    if not isinstance(X, np.ndarray):
+        return None
+    certs = store["certs"]
+    assert isinstance(certs, list)
+    j = int((X @ c).argmax())
+    A_in, A_eq, M = certs[j]
+    scale = max(1.0, float(np.abs(c).max()) if c.size else 0.0)
+    try:
+        y, resid = nnls(M, c)
+    except RuntimeError:  # no convergence: the LP decides
+        return None
+    if resid > VERTEX_DUAL_TOL * scale:
+        return None
+    rows = np.vstack([A_in[y[:A_in.shape[0]] > BOX_DUAL_MIN * scale], A_eq])
+    if rows.shape[0] < A_in.shape[1] or rank(rows) < A_in.shape[1]:
+        return None
+    return np.asarray(X[j])
+
+
 def _relaxed_box_lp(oracle: DAFCOracle, dr: Array, fixed_G: Array, dep: list[int], box: tuple[Sector, ...],
                     store: dict[str, object] | None = None) -> tuple[float, list[Array]]:
     """Upper bound of the work of (22) over every motion whose slips lie in the sector ``box``
@@ -916,26 +995,42 @@ def _relaxed_box_lp(oracle: DAFCOracle, dr: Array, fixed_G: Array, dep: list[int
 
     ``store``: a dict the caller keeps for one box (same ``fixed_G``, ``dep``, ``box``); its model
     is built on the first call and re-solved from scratch (no warm start, so the maximiser does
-    not depend on the order of the directions) on later ones. Returns the bound and the friction
-    directions of a maximiser (tangent coordinates, per dependent point; empty when the box admits
-    no forces)."""
+    not depend on the order of the directions) on later ones, unless an earlier optimum is
+    certified the unique maximiser for ``dr`` (:func:`_box_vertex`; not used where the bound is
+    within :data:`RELAXED_MARGIN` x the force scale per unit motion of the work threshold, so a
+    box is pruned on an LP's answer there). Returns the bound and the friction directions of a
+    maximiser (tangent coordinates, per dependent point; empty when the box admits no forces)."""
     sy, d = oracle.system, oracle.system.d
+    sc = sy.scales
+    x: Array | None = None
     if store is not None and "model" in store:
         model, G, slots = store["model"], store["G"], store["slots"]
         assert isinstance(model, LPModel) and isinstance(G, np.ndarray) and isinstance(slots, list)
-        res = model.solve_cold(G.T @ dr, maximize=True)
+        c = G.T @ dr  # (n,)
+        known = _box_vertex(store, c)
+        if known is not None:
+            sup = float(c @ known) * sc.force + float(dr @ sy.w_ex)
+            size = sc.motion_size(dr)
+            if abs(sup - WORK_TOL * sc.force * size) > RELAXED_MARGIN * sc.force * size:
+                x, objective = known, float(c @ known)
+                oracle.box_vertex_hits += 1
+        if x is None:
+            res = model.solve_cold(c, maximize=True)
     else:
         model, G, slots = _relaxed_box_model(oracle, fixed_G, dep, box)
         if store is not None:
             store.update(model=model, G=G, slots=slots)
         res = model.solve(G.T @ dr, maximize=True)
-    oracle.lp_count += 1
-    if res.status == "infeasible":
-        return -np.inf, []
-    if res.status != "optimal":  # the grip bound bounds every force
-        raise SolverError("HiGHS", f"slip-sector LP ended '{res.status}' although its forces are bounded")
-    assert res.objective is not None and res.x is not None
-    x = res.x
+    if x is None:
+        oracle.lp_count += 1
+        if res.status == "infeasible":
+            return -np.inf, []
+        if res.status != "optimal":  # the grip bound bounds every force
+            raise SolverError("HiGHS", f"slip-sector LP ended '{res.status}' although its forces are bounded")
+        assert res.objective is not None and res.x is not None
+        x, objective = res.x, res.objective
+        if store is not None:
+            _keep_box_vertex(store, model, x)
     targets: list[Array] = []
     for sec, sl in zip(box, slots, strict=True):
         if sec is None:
@@ -945,14 +1040,20 @@ def _relaxed_box_lp(oracle: DAFCOracle, dr: Array, fixed_G: Array, dep: list[int
             targets.append(_unit_angle(sec[0], d))
         else:
             targets.append(x[sl[0]] * _unit_angle(sec[0], d) + x[sl[1]] * _unit_angle(sec[1], d))
-    return float(res.objective * sy.scales.force + dr @ sy.w_ex), targets
+    return float(objective * sc.force + dr @ sy.w_ex), targets
 
 
-def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector, ...], targets: list[Array]
-                ) -> Array | None:
+def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector, ...], targets: list[Array],
+                store: dict[str, object] | None = None) -> Array | None:
     """An allowable redundancy whose dependent slips lie in the sector ``box`` and come closest
     (L1, tangent coordinates) to the directions ``targets``, or None when no allowable motion has
-    its slips in the box (an LP)."""
+    its slips in the box (an LP).
+
+    The LP's matrix depends on the box only (the object direction ``u`` and the targets enter its
+    right-hand side and the bounds of ``z``): ``store``, a dict the caller keeps for one box (same
+    ``dep``, ``box``), holds the model for its later calls, which change those and solve from
+    scratch: the optimum of a new model, to rounding (HiGHS keeps some state of a model across a
+    cold start, so the last bits of the point may differ; test_solvers checks it)."""
     ms, sy, sel = oracle.ms, oracle.system, oracle.sel
     a_bar, nr, d = ms.a_bar, ms.n_redundant, sy.d
     scale = max(1.0, float(np.linalg.norm(ms.Lambda_q_t @ u)))
@@ -960,20 +1061,23 @@ def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector,
     margin = 2.0 * SLIP_TOL * (1.0 + zmax * np.sqrt(nr))
     k_dev = (d - 1) * len(dep)
     n = nr + k_dev
-    A: list[Array] = []
-    b: list[float] = []
     B_u, B_r = oracle.B[:, :a_bar], oracle.B[:, a_bar:]
+    kept = store.get("motion") if store is not None else None
+    build = not isinstance(kept, LPModel)
+    A: list[Array] = []  # rows over [z; deviations] (n,), built only with the model
+    b: list[float] = []
 
-    def row(z_part: Array, dev: int | None = None, sign: float = 0.0) -> Array:
-        """``[z_part, sign e_dev]`` ``(n,)``: a row over ``[z; deviations]``."""
-        out = np.zeros(n)
-        out[:nr] = z_part
-        if dev is not None:
-            out[nr + dev] = sign
-        return out
+    def row(z_part: Array, dev: int | None = None, sign: float = 0.0) -> None:
+        """Append ``[z_part, sign e_dev]`` ``(n,)`` to the rows (when the model is built)."""
+        if build:
+            out = np.zeros(n)
+            out[:nr] = z_part
+            if dev is not None:
+                out[nr + dev] = sign
+            A.append(out)
 
     for r in range(B_r.shape[0]):
-        A.append(row(B_r[r]))
+        row(B_r[r])
         b.append(float(-(B_u[r] @ u)) + 0.5 * ALLOW_TOL)
     for q, (k, sec, g) in enumerate(zip(dep, box, targets, strict=True)):
         T = sy.tangents[sel.s_index[k]]
@@ -982,24 +1086,33 @@ def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector,
         S_0 = T @ (oracle.Ps[rows, :a_bar] @ u)  # (d-1,)
         R, rhs = _sector_rows(sec, d, margin)
         for rr, v in zip(R, rhs, strict=True):
-            A.append(row(-(rr @ S_z)))
+            row(-(rr @ S_z))
             b.append(float(rr @ S_0 - v))
         gn = float(np.linalg.norm(g))
         goal = scale * g / gn if gn > 1e-12 else np.zeros(d - 1)
         for j in range(d - 1):
-            A.append(row(S_z[j], q * (d - 1) + j, -1.0))
+            row(S_z[j], q * (d - 1) + j, -1.0)
             b.append(float(goal[j] - S_0[j]))
-            A.append(row(-S_z[j], q * (d - 1) + j, -1.0))
+            row(-S_z[j], q * (d - 1) + j, -1.0)
             b.append(float(S_0[j] - goal[j]))
     lb, ub = np.zeros(n), np.full(n, np.inf)  # (n,): |z| <= zmax, deviations >= 0
     lb[:nr], ub[:nr] = -zmax, zmax
     cost = np.zeros(n)
     cost[nr:] = 1.0
-    model = LPModel(n, A_ub=np.array(A).reshape(-1, n), b_ub=np.array(b), lb=lb, ub=ub)
+    if isinstance(kept, LPModel):
+        model = kept
+        model.set_ub_rhs(np.array(b))
+        model.set_bounds(lb, ub)
+    else:
+        model = LPModel(n, A_ub=np.array(A).reshape(-1, n), b_ub=np.array(b), lb=lb, ub=ub)
+        if store is not None:
+            store["motion"] = model
     try:
         res = model.solve_cold(cost)
     except SolverError:
         oracle.undecided += 1
+        if store is not None:
+            store.pop("motion", None)  # no half-solved model for the next call
         return None
     oracle.lp_count += 1
     if res.status != "optimal" or res.x is None:
@@ -1079,7 +1192,7 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
         Z, U = Z[moving], U[moving]
         bounds = np.full(len(U), -np.inf)
         targets: list[list[Array]] = []
-        store: dict[str, object] = {}  # the box's relaxed LP, built once for all its directions
+        store: dict[str, object] = {}  # the box's relaxed LP and motion LP, built once for all its directions
         try:
             for j, u in enumerate(U):
                 dr = ms.Lambda_r_t @ (u / np.linalg.norm(u))
@@ -1100,7 +1213,7 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
             # relaxed maximiser's friction directions
             j = order[0]
             u_j = U[j] / np.linalg.norm(U[j])
-            z = _box_motion(oracle, u_j, list(range(nS)), box, targets[j])
+            z = _box_motion(oracle, u_j, list(range(nS)), box, targets[j], store)
             if z is not None:
                 cands.append(np.r_[u_j, z])
             # and the same at the centroid's object direction
@@ -1111,14 +1224,16 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
                     _, tg = _relaxed_box_lp(oracle, ms.Lambda_r_t @ u_c, G0, list(range(nS)), box, store)
                 except SolverError:
                     tg = []  # undecided: this one candidate is not tried
-                z = _box_motion(oracle, u_c, list(range(nS)), box, tg) if tg else None
+                z = _box_motion(oracle, u_c, list(range(nS)), box, tg, store) if tg else None
                 if z is not None:
                     cands.append(np.r_[u_c, z])
         for zc in cands:
             nu = float(np.linalg.norm(zc[:a_bar]))
             if nu <= 1e-9:
                 continue
-            t = oracle.test(ms.Lambda_r_t @ (zc[:a_bar] / nu), zeta_r=zc[a_bar:] / nu, screen=False)
+            # in 3-D a candidate's force LP rows (its exact slips) recur for no later direction:
+            # its optimum is not stored (:meth:`DAFCOracle._keep_vertex`, an SVD each)
+            t = oracle.test(ms.Lambda_r_t @ (zc[:a_bar] / nu), zeta_r=zc[a_bar:] / nu, screen=False, keep=d == 2)
             if t.member:
                 dim = int(np.linalg.matrix_rank(U, tol=1e-9))
                 return SectorSearch(t, boxes, 0, float(bounds.max()), dim)

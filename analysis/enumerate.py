@@ -394,7 +394,9 @@ class _Enumeration:
             todo = [c for c in rows if c not in self.results]
             self._probe(todo, pool)
             todo = [c for c in todo if c not in self.results]
-            found = (pool.map(_worker_search, todo, chunksize=max(1, min(8, len(todo) // (8 * workers))))
+            # one search per task: they differ by 100x in cost (a slip-sector search runs up to its
+            # budget), so chunks of several left a worker idle at the end of a level
+            found = (pool.map(_worker_search, todo, chunksize=1)
                      if pool is not None else (_own_search(self.system, c) for c in todo))
             for k, (c, out) in enumerate(zip(todo, found, strict=True)):
                 self._commit(c, *out)

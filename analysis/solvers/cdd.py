@@ -8,6 +8,7 @@ with ``matrix_canonicalize``.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import cdd
@@ -111,12 +112,17 @@ RETRY_DECIMALS = (12, 9)
 def _generators(H: Array, lin: list[int]) -> cdd.Matrix:
     """cdd's generators of the H-representation ``[b, -A]`` rows ``H`` (``lin``: equality rows);
     on a floating-point inconsistency, retried on unit rows rounded to ``RETRY_DECIMALS``."""
-    attempts = [H]
-    norms = np.linalg.norm(H, axis=1, keepdims=True)
-    unit = H / np.where(norms > 0.0, norms, 1.0)
-    attempts += [np.round(unit, d) for d in RETRY_DECIMALS]
+
+    def attempts() -> Iterator[Array]:
+        """``H``, then (only after a failure) its unit rows rounded to each of ``RETRY_DECIMALS``."""
+        yield H
+        norms = np.linalg.norm(H, axis=1, keepdims=True)
+        unit = H / np.where(norms > 0.0, norms, 1.0)
+        for d in RETRY_DECIMALS:
+            yield np.round(unit, d)
+
     error: Exception | None = None
-    for data in attempts:
+    for data in attempts():
         try:
             mat = cdd.matrix_from_array(data.tolist(), lin_set=lin, rep_type=cdd.RepType.INEQUALITY)
             return cdd.copy_generators(cdd.polyhedron_from_matrix(mat))

@@ -23,6 +23,7 @@ from typing import Literal
 
 import highspy
 import numpy as np
+from highspy._core import _Highs
 from numpy.typing import NDArray
 
 from analysis._types import Array
@@ -40,6 +41,9 @@ _RETRY = (highspy.HighsModelStatus.kUnknown, highspy.HighsModelStatus.kSolveErro
 Status = Literal["optimal", "infeasible", "unbounded"]
 
 _OPTIMAL = highspy.HighsModelStatus.kOptimal
+#: ``passModel``'s codes of a column-wise matrix and of minimisation.
+_COLWISE = int(highspy.MatrixFormat.kColwise)
+_MINIMIZE = int(highspy.ObjSense.kMinimize)
 
 
 @dataclass(frozen=True)
@@ -219,19 +223,25 @@ class LPModel:
         if not (len(r_all) == len(c_all) == len(v_all)):
             raise ValueError("change_coefficients: rows, cols and values differ in length")
         # entries already holding their value need no HiGHS call (the model is unchanged by it)
-        A_full = np.vstack([self.A_ub, self.A_eq])  # (m, n)
-        changed = A_full[r_all, c_all] != v_all
-        if len(np.unique(r_all * self.n + c_all)) < len(r_all):
-            changed[:] = True  # an entry named twice: every write in order, as given
+        n_ub = self._n_ub
+        in_ub = r_all < n_ub  # (k,)
+        current = np.empty(len(v_all))
+        current[in_ub] = self.A_ub[r_all[in_ub], c_all[in_ub]]
+        current[~in_ub] = self.A_eq[r_all[~in_ub] - n_ub, c_all[~in_ub]]
+        changed = current != v_all
         if not changed.any():
             return
-        A_ub, A_eq = self.A_ub.copy(), self.A_eq.copy()
+        if len(np.unique(r_all * self.n + c_all)) < len(r_all):
+            changed[:] = True  # an entry named twice: every write in order, as given
+        # only the arrays that change are replaced (a result keeps the data it was solved from)
+        A_ub = self.A_ub.copy() if bool(in_ub[changed].any()) else self.A_ub
+        A_eq = self.A_eq.copy() if not bool(in_ub[changed].all()) else self.A_eq
         for r, c, v in zip(r_all[changed].tolist(), c_all[changed].tolist(), v_all[changed].tolist(), strict=True):
             self._h.changeCoeff(r, c, v)
-            if r < self._n_ub:
+            if r < n_ub:
                 A_ub[r, c] = v
             else:
-                A_eq[r - self._n_ub, c] = v
+                A_eq[r - n_ub, c] = v
         self.A_ub, self.A_eq = A_ub, A_eq
 
     def use_defaults(self) -> None:
@@ -266,6 +276,12 @@ class LPModel:
         self._h.changeColBounds(int(j), lo, up)
         self.lb, self.ub = self.lb.copy(), self.ub.copy()
         self.lb[int(j)], self.ub[int(j)] = lo, up
+
+    def set_bounds(self, lb: Array | float | None, ub: Array | float | None) -> None:
+        """New bounds of every column (as the constructor takes them; warm start kept)."""
+        lo, up = _bounds(lb, self.n, -INF), _bounds(ub, self.n, INF)
+        self._h.changeColsBounds(self.n, self._idx, lo, up)
+        self.lb, self.ub = lo, up
 
     def set_eq_rhs(self, b_eq: Array) -> None:
         """New right-hand side of the equality rows (warm start kept)."""
@@ -359,28 +375,26 @@ def _load(
     col_upper: Array,  # (n,)
     options: dict[str, bool | int | float | str],
     load_error: str,
-) -> highspy.Highs:
+) -> _Highs:
     """A silent HiGHS instance holding ``row_lower <= A x <= row_upper``, ``col_lower <= x <=
-    col_upper`` with zero objective; ``SolverError(load_error)`` if HiGHS rejects it."""
+    col_upper`` with zero objective; ``SolverError(load_error)`` if HiGHS rejects it.
+
+    The instance is highspy's core class ``_Highs`` (the public ``highspy.Highs`` adds Python
+    callbacks for interrupts, a third of a small model's load time; no callback is used here),
+    and the model is passed as arrays (one call) rather than through a ``HighsLp`` whose
+    attributes are copied one by one: the same model, the same solves (identical points, duals
+    and iteration counts on random and degenerate LPs, ``tests/analysis/test_solvers.py``)."""
     m, n = A.shape
-    h = highspy.Highs()
+    h = _Highs()
     h.setOptionValue("output_flag", False)
     for name, option in options.items():
         h.setOptionValue(name, option)
-    lp = highspy.HighsLp()
-    lp.num_col_ = n
-    lp.num_row_ = m
-    lp.col_cost_ = np.zeros(n)
-    lp.col_lower_ = col_lower
-    lp.col_upper_ = col_upper
-    lp.row_lower_ = row_lower
-    lp.row_upper_ = row_upper
     start, index, value = _csc(A)
-    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
-    lp.a_matrix_.start_ = start
-    lp.a_matrix_.index_ = index
-    lp.a_matrix_.value_ = value
-    if h.passModel(lp) == highspy.HighsStatus.kError:
+    status = h.passModel(n, m, len(value), _COLWISE, _MINIMIZE, 0.0, np.zeros(n),
+                         np.ascontiguousarray(col_lower, dtype=float), np.ascontiguousarray(col_upper, dtype=float),
+                         np.ascontiguousarray(row_lower, dtype=float), np.ascontiguousarray(row_upper, dtype=float),
+                         start, index, value, np.zeros(n, dtype=np.int32))
+    if status == highspy.HighsStatus.kError:
         raise SolverError("HiGHS", load_error)
     return h
 

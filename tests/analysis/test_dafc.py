@@ -517,3 +517,49 @@ def test_slip_sector_search_is_complete_in_2d() -> None:
             assert again.certify(again.test(found.test.direction, zeta_r=zc[parts.ms.a_bar:], screen=False)), c
         checked += 1
     assert checked > 20
+
+
+def test_slip_sector_bounds_reused_from_certified_optima_match_scipy() -> None:
+    """Issue 9 (speed): a slip-sector box's bound for a direction may come from an earlier optimum
+    of the same box's LP, certified the unique maximiser by non-negative multipliers
+    (``_box_vertex``). On boxes of a 3-D wrap combination and seeded directions, every bound equals
+    scipy's LP optimum, every certified point is scipy's maximiser (uniqueness), and the reuse
+    does happen."""
+    from scipy.optimize import linprog
+
+    from analysis.dafc import _box_vertex, _relaxed_box_lp, _relaxed_box_model, _split
+
+    system = example_system("sphere_four_finger_wrap")
+    oracle = _oracle(system, "SFFFSSDFS")
+    ms, sc = oracle.ms, system.scales
+    nS = len(oracle.sel.s_index)
+    dep = list(range(nS))
+    quarters = _split(None, 3)
+    boxes = [tuple(None for _ in dep), tuple(quarters[k % 4] for k in dep),
+             tuple(_split(quarters[1], 3)[0] if k == 0 else quarters[(k + 2) % 4] for k in dep)]
+    rng = np.random.default_rng(4)
+    certified = 0
+    for box in boxes:
+        model, G, _ = _relaxed_box_model(oracle, oracle.st.G_c, dep, box)
+        bounds = list(zip(np.where(np.isfinite(model.lb), model.lb, -np.inf),
+                          np.where(np.isfinite(model.ub), model.ub, np.inf), strict=True))
+        bounds = [(None if np.isinf(lo) else lo, None if np.isinf(up) else up) for lo, up in bounds]
+        store: dict[str, object] = {}
+        # a few directions near each other (the search's generators of one box) and random ones
+        base = rng.normal(size=ms.a_bar)
+        for k in range(30):
+            u = base + (0.05 if k % 2 else 1.0) * rng.normal(size=ms.a_bar)
+            dr = ms.Lambda_r_t @ (u / np.linalg.norm(u))
+            c = G.T @ dr
+            x_known = _box_vertex(store, c)
+            ref = linprog(-c, A_ub=model.A_ub, b_ub=model.b_ub, A_eq=model.A_eq, b_eq=model.b_eq, bounds=bounds,
+                          method="highs")
+            assert ref.status == 0
+            ref_bound = -ref.fun * sc.force + dr @ system.w_ex
+            if x_known is not None:
+                certified += 1
+                assert float(c @ x_known) == pytest.approx(-ref.fun, abs=1e-7 * max(1.0, abs(ref.fun)))
+                np.testing.assert_allclose(x_known, ref.x, atol=1e-6)
+            bound, _ = _relaxed_box_lp(oracle, dr, oracle.st.G_c, dep, box, store)
+            assert bound == pytest.approx(ref_bound, abs=1e-7 * sc.force * max(1.0, abs(ref_bound) / sc.force))
+    assert certified > 5 and oracle.box_vertex_hits > 5

@@ -226,3 +226,80 @@ def test_pointed_cone_test() -> None:
     g = reduce_generators(Generators(np.zeros((1, 2)), np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0]]),
                                      np.zeros((0, 2))))
     assert np.allclose(np.abs(g.lines), [[1.0, 0.0]]) and np.allclose(g.rays, [[0.0, 1.0]])
+
+
+def _reference_solve(A_ub: np.ndarray, b_ub: np.ndarray, lb: np.ndarray, ub: np.ndarray, c: np.ndarray,
+                     feasibility: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """The same LP through highspy's public class and a ``HighsLp`` (the adapter's former path)."""
+    import highspy
+
+    m, n = A_ub.shape
+    h = highspy.Highs()
+    h.setOptionValue("output_flag", False)
+    for name, value in {"presolve": "off", "simplex_strategy": 4, "primal_feasibility_tolerance": feasibility,
+                        "dual_feasibility_tolerance": 1e-10}.items():
+        h.setOptionValue(name, value)
+    lp = highspy.HighsLp()
+    lp.num_col_, lp.num_row_ = n, m
+    lp.col_cost_ = np.zeros(n)
+    lp.col_lower_, lp.col_upper_ = lb, ub
+    lp.row_lower_, lp.row_upper_ = np.full(m, -INF), b_ub
+    cols, rows = np.nonzero(A_ub.T)
+    lp.a_matrix_.format_ = highspy.MatrixFormat.kColwise
+    lp.a_matrix_.start_ = np.r_[0, np.cumsum(np.bincount(cols, minlength=n))].astype(np.int32)
+    lp.a_matrix_.index_ = rows.astype(np.int32)
+    lp.a_matrix_.value_ = A_ub[rows, cols]
+    h.passModel(lp)
+    h.changeColsCost(n, np.arange(n, dtype=np.int32), c)
+    h.run()
+    sol = h.getSolution()
+    return (np.array(sol.col_value), np.array(sol.row_dual), np.array(sol.col_dual),
+            int(h.getInfo().simplex_iteration_count))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_lp_model_loads_the_same_model_as_highs_lp(seed):
+    """LPModel passes its model to HiGHS' core class as arrays: on random LPs, sparse and degenerate
+    (integer data), with bounds and free columns, it returns bit for bit the point and the
+    multipliers of the same LP loaded through ``highspy.Highs`` and a ``HighsLp``."""
+    rng = np.random.default_rng(seed)
+    for trial in range(40):
+        m, n = int(rng.integers(3, 25)), int(rng.integers(2, 12))
+        A = rng.standard_normal((m, n))
+        A[rng.random((m, n)) < 0.3] = 0.0
+        if trial % 2:
+            A = np.round(A)  # degenerate vertices
+        b = np.abs(rng.standard_normal(m)) * (trial % 3 > 0)
+        lb, ub = (np.full(n, -INF), np.full(n, INF)) if trial % 5 == 0 else (np.full(n, -1.0), np.full(n, 1.0))
+        c = np.round(rng.standard_normal(n))
+        x, y, z, iters = _reference_solve(A, b, lb, ub, c, 1e-9)
+        model = LPModel(n, A_ub=A, b_ub=b, lb=lb, ub=ub, feasibility=1e-9)
+        res = model.solve(c)
+        assert int(model._h.getInfo().simplex_iteration_count) == iters
+        if res.status != "optimal":
+            continue
+        assert res.x is not None and res.y_ub is not None and res.z is not None
+        assert np.array_equal(res.x, x) and np.array_equal(res.y_ub, -y) and np.array_equal(res.z, -z)
+
+
+def test_set_bounds_then_cold_solve_equals_a_new_model():
+    """``set_bounds`` + ``set_ub_rhs`` + ``solve_cold`` on a kept model (the slip-sector search's
+    motion LP) gives what a new model with those data gives: the same vertex, to rounding (HiGHS
+    keeps some state of the model across ``clearSolver``, so the last bits may differ)."""
+    rng = np.random.default_rng(5)
+    A = rng.standard_normal((12, 6))
+    kept = LPModel(6, A_ub=A, b_ub=np.ones(12), lb=-1.0, ub=1.0)
+    kept.solve_cold(rng.standard_normal(6))
+    for _ in range(10):
+        b, lim, c = np.abs(rng.standard_normal(12)), float(rng.uniform(0.5, 3.0)), rng.standard_normal(6)
+        lb = np.r_[np.full(3, -lim), np.zeros(3)]
+        ub = np.r_[np.full(3, lim), np.full(3, np.inf)]
+        kept.set_ub_rhs(b)
+        kept.set_bounds(lb, ub)
+        again = kept.solve_cold(c)
+        fresh = LPModel(6, A_ub=A, b_ub=b, lb=lb, ub=ub).solve_cold(c)
+        assert again.status == fresh.status == "optimal"
+        assert again.x is not None and fresh.x is not None
+        np.testing.assert_allclose(again.x, fresh.x, rtol=0.0, atol=1e-13)
+        assert again.problem is not None and np.array_equal(again.problem.ub, fresh.problem.ub)  # type: ignore[union-attr]
+        assert np.all(again.x[:3] <= lim) and np.all(again.x[3:] >= 0.0)
