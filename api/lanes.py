@@ -35,6 +35,10 @@ LIGHT_MAX_JOINTS = 64
 #: of their joints squared (each link's pose from the finger's base), some 12 microseconds a unit.
 LIGHT_MAX_GEOMETRY = 20_000
 
+#: An upload up to this size is light: a scene file of ordinary size parses and validates in
+#: milliseconds (libyaml reads some 250 kB of YAML a second, JSON far more).
+LIGHT_MAX_UPLOAD_BYTES = 64_000
+
 Lane = Literal["light", "heavy"]
 
 
@@ -49,6 +53,11 @@ def analysis_lane(combination: str | None, contacts: int, joints: int) -> Lane:
 def geometry_lane(configurations: int, finger_joints: Sequence[int]) -> Lane:
     """The drawing geometry of ``configurations`` joint vectors of fingers of these sizes."""
     return "light" if configurations * sum(n * n for n in finger_joints) <= LIGHT_MAX_GEOMETRY else "heavy"
+
+
+def upload_lane(size: int) -> Lane:
+    """The parse and validation of an uploaded scene file of ``size`` bytes."""
+    return "light" if size <= LIGHT_MAX_UPLOAD_BYTES else "heavy"
 
 
 async def run_in_lane(lane: Lane, light: ProcessPool, heavy: ProcessPool, kind: str, payload: dict[str, Any],

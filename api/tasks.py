@@ -215,6 +215,43 @@ def run_contacts(payload: dict[str, Any], progress: Progress | None = None) -> d
             "tolerance": det.tolerance}
 
 
+def run_upload(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
+    """``POST /scenes/upload``: the uploaded bytes through the scene files' one parser
+    (:func:`analysis.loader.parse_scene_data`), the HTTP file rule, contact detection where the
+    scene leaves it, the model and the geometric checks; in a worker, so a slow or hostile file
+    costs a worker's time under the request's time limit, never the server's. Returns the
+    scene's JSON and its joint count; a scene over ``max_joints`` joints returns ``scene`` None
+    before any kinematics (the route answers 413)."""
+    from analysis.exceptions import SceneError
+    from analysis.loader import check_geometry, parse_scene_data, wants_detection, with_detected_contacts
+    from analysis.scene import Scene
+    from api.schemas import _check_files
+    from api.workers import FILE_ERROR
+
+    try:
+        data = parse_scene_data(payload["raw"], payload["suffix"], max_bytes=payload["max_bytes"])
+    except SceneError as e:
+        raise SceneError(e.loc, e.reason, [{"loc": list(e.loc), "msg": e.reason, "type": FILE_ERROR}]) from None
+    try:
+        _check_files(data)
+    except ValueError as e:  # "<field>: <reason>", a URDF or mesh outside the allowed places
+        where, _, reason = str(e).partition(": ")
+        loc = tuple(int(p) if p.isdigit() else p for p in where.split("."))
+        raise SceneError(loc, reason) from None
+    if wants_detection(data):  # contacts omitted, [] or "auto": found from the geometry
+        data, _ = with_detected_contacts(data)
+    try:
+        scene = Scene.model_validate(data)
+    except Exception:
+        scene_from_dict(data)  # raises the SceneError naming the first bad field
+        raise
+    joints = scene.M
+    if joints > payload["max_joints"]:
+        return {"scene": None, "joints": joints}
+    check_geometry(scene)
+    return {"scene": scene.model_dump(mode="json"), "joints": joints}
+
+
 def _rounded(a: Any) -> list[float]:
     return [round(float(x), 9) for x in np.asarray(a).ravel()]
 
@@ -225,6 +262,7 @@ TASKS: dict[str, Callable[[dict[str, Any], Progress | None], dict[str, Any]]] = 
     "plan": run_plan,
     "geometry": run_geometry,
     "contacts": run_contacts,
+    "upload": run_upload,
 }
 
 

@@ -2,27 +2,20 @@
 
 from __future__ import annotations
 
-import asyncio
 from typing import Annotated, Any
 
 from fastapi import APIRouter, File, Response, UploadFile
-from pydantic import SkipValidation, ValidationError
+from pydantic import SkipValidation
 
 from analysis.exceptions import SceneError
-from analysis.loader import (
-    check_geometry,
-    parse_scene_data,
-    read_scene_data,
-    scene_from_dict,
-    wants_detection,
-    with_detected_contacts,
-)
+from analysis.loader import read_scene_data
 from analysis.scene import Scene
 from api.bodies import validated
-from api.deps import AnalysisPoolDep, LightPoolDep, SettingsDep, check_hand_size, check_raw_hand_size
+from api.deps import AnalysisPoolDep, LightPoolDep, SettingsDep, _hand_size_error, check_hand_size, check_raw_hand_size
 from api.errors import ApiError
-from api.lanes import geometry_lane, run_in_lane
-from api.schemas import ContactsCreate, ContactsPublic, ErrorBody, ExampleScene, GeometryCreate, _check_files
+from api.lanes import geometry_lane, run_in_lane, upload_lane
+from api.schemas import ContactsCreate, ContactsPublic, ErrorBody, ExampleScene, GeometryCreate
+from api.workers import FILE_ERROR, TaskError, TaskTimeout
 
 router = APIRouter(prefix="/scenes", tags=["scenes"])
 
@@ -47,43 +40,42 @@ def list_examples(settings: SettingsDep) -> list[dict[str, Any]]:
 @router.post("/upload", response_model=dict[str, Any], responses={413: {"model": ErrorBody},
                                                                   422: {"model": ErrorBody}})
 async def upload_scene(file: Annotated[UploadFile, File(description="a scene, .json or .yaml")],
-                       settings: SettingsDep) -> dict[str, Any]:
+                       settings: SettingsDep, light: LightPoolDep, pool: AnalysisPoolDep,
+                       response: Response) -> dict[str, Any]:
     """Validate an uploaded scene file and return it as JSON (422 names the bad field).
 
     The file goes through the scene files' one parser (:func:`analysis.loader.parse_scene_data`:
     size, nesting depth, YAML aliases and JSON-only values checked before anything is built),
-    then the model and the geometric checks, all off the event loop."""
+    then the model and the geometric checks, all in a worker under ``request_time_limit``
+    (:func:`api.tasks.run_upload`): a light one for a file up to ``LIGHT_MAX_UPLOAD_BYTES``, else
+    a heavy one (``X-Lane``). Scenes over ``max_joints`` joints get 413."""
     raw = await file.read(settings.max_body_bytes + 1)
     if len(raw) > settings.max_body_bytes:
         raise ApiError(413, f"file too large: the limit is {settings.max_body_bytes} bytes",
                        limit=settings.max_body_bytes)
     name = (file.filename or "scene.json").lower()
     suffix = ".yaml" if name.endswith((".yaml", ".yml")) else ".json"
-    scene = await asyncio.to_thread(_validate_upload, raw, suffix, settings.max_body_bytes, settings)
-    return scene.model_dump(mode="json")
-
-
-def _validate_upload(raw: bytes, suffix: str, max_bytes: int, settings: Any) -> Scene:
+    payload = {"raw": raw, "suffix": suffix, "max_bytes": settings.max_body_bytes, "max_joints": settings.max_joints}
+    lane = upload_lane(len(raw))
+    response.headers["X-Lane"] = lane
     try:
-        data = parse_scene_data(raw, suffix, max_bytes=max_bytes)
-    except SceneError as e:
-        where = ".".join(str(p) for p in e.loc)
-        raise ApiError(422, f"{'scene.' + where if where else 'file'}: {e.reason}",
-                       errors=[{"loc": ["scene", *e.loc] if e.loc else ["file"], "msg": e.reason,
-                                "type": "scene_file"}]) from None
-    try:
-        _check_files(data)
-    except ValueError as e:
-        raise ApiError(422, f"scene.{e}") from None
-    if wants_detection(data):  # contacts omitted, [] or "auto": found from the geometry
-        data, _ = with_detected_contacts(data)
-    try:
-        scene = Scene.model_validate(data)
-    except ValidationError:
-        scene_from_dict(data)  # raises the SceneError naming the first bad field (422)
+        out = await run_in_lane(lane, light, pool, "upload", payload, timeout=settings.request_time_limit)
+    except TaskError as e:
+        first = (e.errors or [{}])[0]
+        if e.type == "scene" and first.get("type") == FILE_ERROR:  # the file itself: at ``file`` or the value
+            loc = list(first.get("loc") or [])
+            raise ApiError(422, f"{'scene.' + '.'.join(map(str, loc)) if loc else 'file'}: {first['msg']}",
+                           errors=[{"loc": ["scene", *loc] if loc else ["file"], "msg": first["msg"],
+                                    "type": FILE_ERROR}]) from None
         raise
-    check_hand_size(scene, settings)  # the joint count before any kinematics (413 naming the limit)
-    check_geometry(scene)  # SceneError -> 422 naming the field
+    except TaskTimeout as e:
+        detail = (f"time limit: reading and checking the file took more than {e.limit:g} s "
+                  "(request_time_limit); send a smaller file, or JSON, which reads faster than YAML")
+        raise ApiError(422, detail, limit=e.limit,
+                       errors=[{"loc": ["file"], "msg": detail, "type": "time_limit"}]) from None
+    if out["scene"] is None:
+        _hand_size_error(out["joints"], settings)  # 413 naming the limit, before any kinematics
+    scene: dict[str, Any] = out["scene"]
     return scene
 
 

@@ -15,6 +15,7 @@ from analysis.exceptions import SceneError
 from analysis.loader import (
     MAX_SCENE_DEPTH,
     MAX_YAML_ALIASES,
+    YAML_LOADERS,
     load_scene,
     parse_scene_data,
     parse_scene_text,
@@ -35,21 +36,27 @@ def alias_bomb(levels: int = 9, width: int = 6) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _error(source: str | bytes, suffix: str, **kw: int) -> SceneError:
+@pytest.fixture(params=YAML_LOADERS, ids=lambda c: c.__name__)
+def loader(request: pytest.FixtureRequest) -> type:
+    """Each YAML reader: libyaml's (C, the default where PyYAML has it) and PyYAML's own."""
+    return request.param  # type: ignore[no-any-return]
+
+
+def _error(source: str | bytes, suffix: str, loader: type | None = None, **kw: int) -> SceneError:
     with pytest.raises(SceneError) as info:
-        parse_scene_data(source, suffix, **kw)
+        parse_scene_data(source, suffix, yaml_loader=loader, **kw)
     message = str(info.value)
     assert "\n" not in message and "Traceback" not in message, message
     return info.value
 
 
-def test_alias_bomb_is_refused_fast_and_small() -> None:
+def test_alias_bomb_is_refused_fast_and_small(loader: type) -> None:
     bomb = alias_bomb()
     assert len(bomb.encode()) < 400
     tracemalloc.start()
     t0 = time.perf_counter()
     try:
-        e = _error(bomb, ".yaml")
+        e = _error(bomb, ".yaml", loader)
         elapsed = time.perf_counter() - t0
         _, peak = tracemalloc.get_traced_memory()
     finally:
@@ -58,19 +65,20 @@ def test_alias_bomb_is_refused_fast_and_small() -> None:
     assert elapsed < 0.5 and peak < 20_000_000, (elapsed, peak)
 
 
-def test_wide_alias_expansion_under_the_alias_count_is_refused() -> None:
+def test_wide_alias_expansion_under_the_alias_count_is_refused(loader: type) -> None:
     """Few aliases, but each of a large list: refused by the expanded size, not built."""
     big = "[" + ", ".join(["1"] * 20_000) + "]"
     text = f"a: &a {big}\n" + "".join(f"b{i}: *a\n" for i in range(20))
-    assert "expand to more than" in str(_error(text, ".yaml"))
+    assert "expand to more than" in str(_error(text, ".yaml", loader))
 
 
-def test_recursive_alias_is_refused() -> None:
-    assert "recursive" in str(_error("a: &a [1, *a]\n", ".yaml"))
+def test_recursive_alias_is_refused(loader: type) -> None:
+    assert "recursive" in str(_error("a: &a [1, *a]\n", ".yaml", loader))
 
 
-def test_a_few_aliases_still_work() -> None:
-    assert parse_scene_data("r: &r 0.5\nlinks: [{length: 1, radius: *r}, {length: 2, radius: *r}]\n", ".yaml") == {
+def test_a_few_aliases_still_work(loader: type) -> None:
+    text = "r: &r 0.5\nlinks: [{length: 1, radius: *r}, {length: 2, radius: *r}]\n"
+    assert parse_scene_data(text, ".yaml", yaml_loader=loader) == {
         "r": 0.5, "links": [{"length": 1, "radius": 0.5}, {"length": 2, "radius": 0.5}]}
 
 
@@ -82,9 +90,9 @@ def test_a_few_aliases_still_work() -> None:
     ("".join("  " * i + "-\n" for i in range(MAX_SCENE_DEPTH + 5)), ".yaml"),
     ("[" * 1_000_000, ".yaml"),
 ])
-def test_deep_nesting_is_refused_naming_the_reason(text: str, suffix: str) -> None:
+def test_deep_nesting_is_refused_naming_the_reason(text: str, suffix: str, loader: type) -> None:
     t0 = time.perf_counter()
-    e = _error(text, suffix, max_bytes=5_000_000)
+    e = _error(text, suffix, loader, max_bytes=5_000_000)
     assert f"nested more than {MAX_SCENE_DEPTH} levels deep" in str(e)
     assert time.perf_counter() - t0 < 1.0
 
@@ -102,18 +110,29 @@ def test_nesting_at_the_limit_is_accepted() -> None:
     ("contacts: !!omap [{a: 1}]\n", ("contacts", 0), "pair"),
     ("1: one\n", (), "mapping key 1 is not a string"),
 ])
-def test_yaml_values_that_are_not_json_name_the_field(text: str, loc: tuple[object, ...], what: str) -> None:
-    e = _error(text, ".yaml")
+def test_yaml_values_that_are_not_json_name_the_field(text: str, loc: tuple[object, ...], what: str,
+                                                      loader: type) -> None:
+    e = _error(text, ".yaml", loader)
     assert e.loc == loc and what in str(e), str(e)
 
 
-def test_yaml_python_tags_are_refused() -> None:
-    assert "could not determine a constructor" in str(_error("!!python/object/apply:os.system [ls]\n", ".yaml"))
+def test_yaml_python_tags_are_refused(loader: type) -> None:
+    text = "!!python/object/apply:os.system [ls]\n"
+    assert "could not determine a constructor" in str(_error(text, ".yaml", loader))
 
 
-def test_yaml_tab_error_is_one_line_with_its_place() -> None:
-    e = _error("dim: 2\n\tname: x\n", ".yaml")
-    assert str(e).startswith("scene: cannot parse YAML: line 2, column 1:") and "'\\t'" in str(e), str(e)
+def test_yaml_tab_error_is_one_line_with_its_place(loader: type) -> None:
+    e = _error("dim: 2\n\tname: x\n", ".yaml", loader)
+    assert str(e).startswith("scene: cannot parse YAML: line 2, column 1:") and ("'\\t'" in str(e) or "tab" in str(e))
+
+
+@pytest.mark.parametrize("path", sorted(EXAMPLES.glob("*.json")), ids=lambda p: p.stem)
+def test_yaml_loaders_read_every_example_as_its_json(path: Path, loader: type) -> None:
+    """Both YAML readers give the JSON's own values for every example written out as YAML (the
+    block style, and the flow style that nests brackets like JSON)."""
+    data = json.loads(path.read_text())
+    for flow in (False, True):
+        assert parse_scene_data(yaml.safe_dump(data, default_flow_style=flow), ".yaml", yaml_loader=loader) == data
 
 
 def test_json_syntax_error_names_line_and_column() -> None:
