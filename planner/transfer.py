@@ -206,9 +206,10 @@ class _SegmentValidator(ob.MotionValidator):
         super().__init__(si)
         self._space, self._m, self._valid_many, self._budget = space, m, valid_many, budget
 
-    def checkMotion(self, s1: Any, s2: Any, *last_valid: Any) -> bool:
-        if last_valid:  # the overload that reports the last valid state: not used by RRTConnect nor the simplifier
-            raise NotImplementedError("checkMotion(s1, s2, lastValid) is not provided")
+    def checkMotion(self, s1: Any, s2: Any) -> bool:
+        # OMPL's bindings expose only this overload to Python (``ob.MotionValidator.checkMotion``
+        # takes two states); the one that reports the last valid state is called by planners this
+        # module does not use (not RRTConnect, not the path simplifier)
         m = self._m
         a = np.array([s1[j] for j in range(m)])
         b = np.array([s2[j] for j in range(m)])

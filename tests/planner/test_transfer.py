@@ -144,3 +144,12 @@ def test_certificate_agrees_with_a_dense_check(planar_scene: Scene, free_left) -
             assert clear < 0.0 and dense < K * DENSE_STEP / 2
         assert checks >= 2
     assert verdicts == {True, False}
+
+
+def test_the_bindings_expose_only_the_two_state_check_motion() -> None:
+    """_SegmentValidator overrides ``checkMotion(s1, s2)``, the one overload OMPL's bindings give
+    Python; a binding that adds the ``lastValid`` overload must be handled there too."""
+    from ompl import base as ob
+
+    doc = ob.MotionValidator.checkMotion.__doc__ or ""
+    assert doc.count("checkMotion(") == 1 and "arg1" in doc and "arg2" not in doc, doc
