@@ -3,7 +3,9 @@ friction-uncertainty combination (end of section IV-C).
 
 1. Problem (31): among the motions ``dzeta_c = [dzeta~_d; dzeta~_r]`` realising the unit
    direction ``dzeta~_d``, pick the redundancy minimising ``phi = |dq|`` (CasADi/IPOPT,
-   :mod:`analysis.solvers.casadi_nlp`), subject to the set S of (30).
+   :mod:`analysis.solvers.casadi_nlp`), subject to the set S of (30). In the plane an S-point's
+   unit slip is one of two tangents, so (31) is feasible exactly when one of ``2^#S`` LPs is
+   (:func:`planar_slip_patterns`); when none is, IPOPT is not run.
 2. Set (32) for that motion: with the slips fixed every condition of (30) is linear in the
    contact forces, so ``T = {tau(f_c) : f_c in P}`` with
 
@@ -19,6 +21,7 @@ friction-uncertainty combination (end of section IV-C).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -116,6 +119,53 @@ def _nlp_data(
     )
 
 
+def planar_slip_patterns(p: RedundancyNLP, T_s: Array) -> list[Array]:
+    """The slip-sign patterns ``sigma`` ``(#S,)`` for which problem (31) is feasible, in the plane.
+
+    In 2-D an S-point's slip is tangential, ``P_k dzeta_c = s_k t_k`` (``t_k`` the row ``k`` of
+    ``T_s`` ``(#S, 2)``), so its unit slip is ``sigma_k t_k`` and ``|slip_k| >= delta`` is
+    ``sigma_k t_k^T P_k [u; dzeta~_r] >= delta``. For a fixed ``sigma`` the friction columns of
+    ``w`` (eq. 12) are constants and every constraint of (31) is linear in ``(dzeta~_r, f_c)``:
+
+        B [u; z] <= 0,   sigma_k t_k^T P_k [u; z] >= delta,   C f_c <= 0,
+        Xi^T w = 0,   N_u^T Lambda~_r^T w = 0,   u^T Lambda~_r^T w >= w_min,
+        w = (G_c - sum_k mu_k sigma_k G_k t_k e_k^T) f_c + w_ex
+
+    (``e_k`` picks the S-point's normal force). Problem (31) is feasible exactly when one of these
+    ``2^#S`` LPs is. SolverError when HiGHS decides none of them either way."""
+    a_bar, r, L_c = p.u.shape[0], p.Lambda_qr_t.shape[1], p.C.shape[1]
+    n_s = len(p.s_cols)
+    LrT = p.Lambda_r_t.T  # (a_bar, D)
+    rows_ub: list[Array] = [np.hstack([np.zeros((p.C.shape[0], r)), p.C])]  # C f_c <= 0
+    rhs_ub: list[Array] = [np.zeros(p.C.shape[0])]
+    if p.B.shape[0]:  # allowable: B_r z <= -B_u u
+        rows_ub.append(np.hstack([p.B[:, a_bar:], np.zeros((p.B.shape[0], L_c))]))
+        rhs_ub.append(-p.B[:, :a_bar] @ p.u)
+    slip_rows = np.array([T_s[k] @ p.P_s[2 * k : 2 * k + 2] for k in range(n_s)]).reshape(n_s, -1)  # (#S, a)
+    out: list[Array] = []
+    for signs in itertools.product((1.0, -1.0), repeat=n_s):
+        sigma = np.array(signs)  # (#S,)
+        G_eff = p.G_c.copy()  # (D, L_c)
+        for k, col in enumerate(p.s_cols):
+            G_eff[:, col] -= p.mu_s[k] * sigma[k] * (p.G_s_blocks[k] @ T_s[k])
+        W = np.hstack([np.zeros((G_eff.shape[0], r)), G_eff])  # w = W x + w_ex, x = [z; f_c]
+        s_rows = -sigma[:, None] * slip_rows  # -sigma t^T P [u; z] <= -delta
+        A_ub = np.vstack([*rows_ub, np.hstack([s_rows[:, a_bar:], np.zeros((n_s, L_c))]), -(p.u @ LrT @ W)[None, :]])
+        b_ub = np.concatenate([*rhs_ub, -p.slip_min - s_rows[:, :a_bar] @ p.u, [p.u @ LrT @ p.w_ex - p.w_min]])
+        eq = [p.Xi.T @ W] if p.Xi.shape[1] else []
+        beq = [-p.Xi.T @ p.w_ex] if p.Xi.shape[1] else []
+        if p.N_u.shape[1]:
+            eq.append(p.N_u.T @ LrT @ W)
+            beq.append(-p.N_u.T @ LrT @ p.w_ex)
+        res = solve_lp(np.zeros(r + L_c), A_ub, b_ub, np.vstack(eq) if eq else None,
+                       np.concatenate(beq) if beq else None)
+        if res.found:
+            out.append(sigma)
+        elif res.status != "infeasible":
+            raise SolverError("HiGHS", f"the planar slip-pattern LP of (31) ended '{res.status}'")
+    return out
+
+
 def realisable_direction(
     system: GraspSystem, sel: Selection, ms: MotionSpace, st: Statics, fs: FrictionSet, start: DirectionTest
 ) -> Array | None:
@@ -139,6 +189,12 @@ def _chosen_motion(
         zc = ms.zeta_c(u)
         return zc, "no redundancy", float(np.linalg.norm(ms.Lambda_q_t @ u))
     p = _nlp_data(system, sel, ms, st, fs, u, with_forces=oracle.slip_depends_on_redundancy)
+    if p.with_forces and system.d == 2 and sel.s_index:
+        # exact in the plane: (31) is 2^#S LPs; when none is feasible IPOPT cannot succeed either
+        T_s = np.array([system.tangents[i][0] for i in sel.s_index]).reshape(-1, 2)  # (#S, 2)
+        if not planar_slip_patterns(p, T_s):
+            raise EmptyTorqueSet("problem (31) has no solution for this direction (no slip-sign pattern of the "
+                                 "S-points admits it: an LP each)")
     z0 = oracle.redundancy_for(u)
     res = solve_redundancy(p, zeta0=z0)
     if not res.found and start is not None and start.zeta_c is not None:

@@ -3,6 +3,8 @@ combination (end of section IV-C), re-checked with forces and torques recomputed
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 from closure_helpers import disk_scene, effective_grasp_matrix, full_forces, parts_of, scipy_lp, slip
@@ -11,8 +13,9 @@ from analysis.combination import CombinationParts, summarize
 from analysis.contacts import build_system
 from analysis.dafc import DAFCOracle, dafc_set
 from analysis.exceptions import EmptyTorqueSet, NotInDAFC
+from analysis.solvers.casadi_nlp import RedundancyNLP, solve_redundancy
 from analysis.stationary import stationary_grasp
-from analysis.torques import TorqueSet, friction_uncertainty, torque_set
+from analysis.torques import TorqueSet, _nlp_data, friction_uncertainty, planar_slip_patterns, torque_set
 
 NAME = "planar_disk_envelope"
 #: feasible combinations of the planar example whose example direction has a torque set:
@@ -236,3 +239,66 @@ def test_example_direction_prefers_a_realisable_member_ddsss() -> None:
     _, ts = _torque_set("DDSSS")
     res = ts.residuals(ts.f_c)
     assert res["inequality"] <= TOL and res["equality"] <= TOL and res["work"] > 0.0
+
+
+
+def _independent_slip_directions(p: RedundancyNLP) -> set[tuple[float, ...]]:
+    """Problem (31) in the plane written out again with scipy, each S-point's tangent taken from
+    the range of its slip rows (SVD) rather than from the contact frame: the unit slips
+    ``(#S x 2)`` for which it is feasible, rounded."""
+    a_bar, r, L_c, n_s = p.u.shape[0], p.Lambda_qr_t.shape[1], p.C.shape[1], len(p.s_cols)
+    found: set[tuple[float, ...]] = set()
+    for sigma in itertools.product((1.0, -1.0), repeat=n_s):
+        A_ub = [np.hstack([np.zeros((p.C.shape[0], r)), p.C])]
+        b_ub = [np.zeros(p.C.shape[0])]
+        if p.B.shape[0]:
+            A_ub.append(np.hstack([p.B[:, a_bar:], np.zeros((p.B.shape[0], L_c))]))
+            b_ub.append(-p.B[:, :a_bar] @ p.u)
+        G = p.G_c.copy()
+        units = []
+        for k, col in enumerate(p.s_cols):
+            P_k = p.P_s[2 * k : 2 * k + 2]  # (2, a)
+            t = sigma[k] * np.linalg.svd(P_k)[0][:, 0]  # a unit slip direction
+            units.append(t)
+            A_ub.append(np.concatenate([-(t @ P_k)[a_bar:], np.zeros(L_c)])[None, :])  # t . slip >= delta
+            b_ub.append(np.array([-p.slip_min + (t @ P_k)[:a_bar] @ p.u]))
+            G[:, col] = G[:, col] - p.mu_s[k] * (p.G_s_blocks[k] @ t)  # friction against the slip
+        W = np.hstack([np.zeros((G.shape[0], r)), G])
+        LrT = p.Lambda_r_t.T
+        A_ub.append(-(p.u @ LrT @ W)[None, :])
+        b_ub.append(np.array([p.u @ LrT @ p.w_ex - p.w_min]))
+        A_eq = np.vstack([p.Xi.T @ W, p.N_u.T @ LrT @ W])
+        b_eq = np.concatenate([-p.Xi.T @ p.w_ex, -p.N_u.T @ LrT @ p.w_ex])
+        status, _, _ = scipy_lp(np.zeros(r + L_c), np.vstack(A_ub), np.concatenate(b_ub), A_eq, b_eq)
+        assert status in (0, 2), status
+        if status == 0:
+            found.add(tuple(np.round(np.concatenate(units), 6) + 0.0))
+    return found
+
+
+@pytest.mark.parametrize("combination", ["DFDSS", "SDDSS", "FSFSS", "SDSSS", "DDSSS", "SSDDF"])
+def test_planar_slip_patterns_decide_problem_31(combination: str) -> None:
+    """In the plane, problem (31) is feasible exactly for the slip-sign patterns
+    :func:`planar_slip_patterns` returns: the same as an independent scipy formulation, every
+    IPOPT solution's slip signs among them, and no IPOPT solution where there is none."""
+    q = parts_of(NAME, combination)
+    oracle = q.oracle()
+    T_s = np.array([q.system.tangents[i][0] for i in q.sel.s_index]).reshape(-1, 2)
+    members = [t for t in dafc_set(oracle, samples=24, refine=0).tests if t.member]
+    assert members, combination
+    empty = solved = 0
+    for t in members[:6]:
+        p = _nlp_data(q.system, q.sel, q.ms, q.st, q.fs, t.u, with_forces=True)
+        patterns = planar_slip_patterns(p, T_s)
+        ours = {tuple(np.round((sigma[:, None] * T_s).ravel(), 6) + 0.0) for sigma in patterns}
+        assert ours == _independent_slip_directions(p), (combination, t.u)
+        res = solve_redundancy(p, zeta0=oracle.redundancy_for(t.u))
+        if res.found:
+            solved += 1
+            slip = (p.P_s @ np.concatenate([t.u, res.zeta_r])).reshape(-1, 2)  # (#S, 2)
+            signs = np.sign((slip * T_s).sum(axis=1))
+            assert any(np.array_equal(signs, sigma) for sigma in patterns), (combination, signs, patterns)
+        if not patterns:
+            empty += 1
+            assert not res.found, (combination, t.u)
+    assert empty + solved > 0, combination  # (each combination has one or both)
