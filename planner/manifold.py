@@ -13,6 +13,7 @@ Jacobian at ``s = 0`` is ``A_c`` (eq. 19), so its tangent space there is the mot
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -299,21 +300,23 @@ class ContactManifold:
 
     def _roll_at(self, k: int, a: Array, b: Array, c: Array, theta: float) -> tuple[float, float]:
         """Rolling contact ``k``'s gap and rolling row (see :meth:`_rolling_rows`) for the link's
-        axis ``a -> b`` ``(2,)`` each, the disk centre ``c`` ``(2,)`` and the disk's turn ``theta``
-        from the start (:meth:`body_distance` and :meth:`_roll_coords` in one)."""
+        axis ``a -> b``, the disk centre ``c`` (``(2,)`` each) and the disk's turn ``theta`` from
+        the start (:meth:`body_distance` and :meth:`_roll_coords` in one; plain float arithmetic:
+        a projection evaluates it a few hundred times per motion)."""
         _, ref, side, sig0, gamma0 = self.rolls[k]
-        e = b - a  # (2,)
-        L = float(np.hypot(e[0], e[1]))
-        eh = e / L
-        t = min(max(float((c - a) @ eh) / L, 0.0), 1.0)
-        v = c - (a + t * L * eh)  # (2,) from the closest axis point to the centre
-        dist = float(np.hypot(v[0], v[1]))
-        u = v / max(dist, 1e-300)
+        a0, a1 = float(a[0]), float(a[1])
+        e0, e1 = float(b[0]) - a0, float(b[1]) - a1
+        w0, w1 = float(c[0]) - a0, float(c[1]) - a1
+        L = math.hypot(e0, e1)
+        t = min(max((w0 * e0 + w1 * e1) / (L * L), 0.0), 1.0)
+        v0, v1 = w0 - t * e0, w1 - t * e1  # from the closest axis point to the centre
+        dist = math.hypot(v0, v1)
+        u0, u1 = v0 / max(dist, 1e-300), v1 / max(dist, 1e-300)
         r_link = self.hand.body_radius(ref)
-        n0, n1 = -side * eh[1], side * eh[0]  # the side's outward normal
-        psi = float(np.arctan2(n0 * u[1] - n1 * u[0], n0 * u[0] + n1 * u[1]))
-        sig, gamma = -side * t * L + r_link * psi, float(np.arctan2(-u[1], -u[0]))
-        dbeta = (gamma - gamma0 + np.pi) % (2 * np.pi) - np.pi - theta
+        n0, n1 = -side * e1 / L, side * e0 / L  # the side's outward normal
+        psi = math.atan2(n0 * u1 - n1 * u0, n0 * u0 + n1 * u1)
+        sig, gamma = -side * t * L + r_link * psi, math.atan2(-u1, -u0)
+        dbeta = (gamma - gamma0 + math.pi) % (2 * math.pi) - math.pi - theta
         return dist - r_link - self.radius, (sig - sig0) + self.radius * dbeta
 
     def _rolling_rows(self, x: Array) -> Array:
@@ -325,7 +328,7 @@ class ContactManifold:
         out = np.empty(2 * len(self.rolls))
         for k, roll in enumerate(self.rolls):
             a, b = self.hand.body_segment(roll[1], q)
-            out[2 * k: 2 * k + 2] = self._roll_at(k, a[:2], b[:2], c, float(s[2]))
+            out[2 * k: 2 * k + 2] = self._roll_at(k, a, b, c, float(s[2]))
         return out
 
     def _roll_grad(self, k: int, a: Array, b: Array, c: Array) -> Array:
@@ -334,31 +337,41 @@ class ContactManifold:
         ``w = c - a``, the foot parameter ``t = w.e / |e|^2`` (held at 0 or 1 beyond the ends, where
         ``dt = 0``) and ``v = w - t e``: ``d|v| = u.dv``, the angle of ``v`` (of ``u``, of ``gamma``)
         changes by ``v_perp.dv / |v|^2`` and that of ``e`` (of the side's normal) by
-        ``e_perp.de / |e|^2``, ``psi`` by their difference, ``sigma = -side t |e| + rho psi``."""
+        ``e_perp.de / |e|^2``, ``psi`` by their difference, ``sigma = -side t |e| + rho psi``.
+
+        In plain float arithmetic, ``z = (a, b, c, theta)``: ``de/dz = [-I, I, 0, 0]``,
+        ``dw/dz = [-I, 0, I, 0]``, so ``dt = (e.dw + w.de - 2 t e.de) / |e|^2`` and
+        ``dv = dw - t de - e dt`` column by column."""
         _, ref, side, _, _ = self.rolls[k]
-        e = b - a  # (2,)
-        w = c - a  # (2,)
-        L2 = float(e @ e)
-        L = float(np.sqrt(L2))
-        t_raw = float(w @ e) / L2
+        a0, a1 = float(a[0]), float(a[1])
+        e0, e1 = float(b[0]) - a0, float(b[1]) - a1
+        w0, w1 = float(c[0]) - a0, float(c[1]) - a1
+        L2 = e0 * e0 + e1 * e1
+        L = math.sqrt(L2)
+        t_raw = (w0 * e0 + w1 * e1) / L2
         t = min(max(t_raw, 0.0), 1.0)
-        v = w - t * e  # (2,) from the foot on the axis to the centre
-        dist2 = float(v @ v)
-        De = np.zeros((2, 7))  # d e / d z, z = (a, b, c, theta)
-        De[:, 0:2] = -_EYE2
-        De[:, 2:4] = _EYE2
-        Dw = np.zeros((2, 7))  # d w / d z
-        Dw[:, 0:2] = -_EYE2
-        Dw[:, 4:6] = _EYE2
-        dt = (e @ Dw + w @ De - 2.0 * t * (e @ De)) / L2 if 0.0 < t_raw < 1.0 else np.zeros(7)  # (7,)
-        Dv = Dw - t * De - np.outer(e, dt)  # (2, 7)
-        d_dist = (v @ Dv) / np.sqrt(dist2)  # (7,)
-        d_angle_v = np.array([-v[1], v[0]]) @ Dv / dist2  # (7,) the angle of v: of u and of gamma
-        d_angle_e = np.array([-e[1], e[0]]) @ De / L2  # (7,) the angle of e: of the side's normal
-        d_sigma = -side * (L * dt + t * (e @ De) / L) + self.hand.body_radius(ref) * (d_angle_v - d_angle_e)
-        d_roll = d_sigma + self.radius * d_angle_v
-        d_roll[6] -= self.radius  # beta = gamma - theta
-        return np.vstack([d_dist, d_roll])
+        v0, v1 = w0 - t * e0, w1 - t * e1  # from the foot on the axis to the centre
+        dist2 = v0 * v0 + v1 * v1
+        dist = math.sqrt(dist2)
+        # the columns of de/dz and dw/dz, as (x, y) pairs over z = (a_x, a_y, b_x, b_y, c_x, c_y, theta)
+        de = ((-1.0, 0.0), (0.0, -1.0), (1.0, 0.0), (0.0, 1.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))
+        dw = ((-1.0, 0.0), (0.0, -1.0), (0.0, 0.0), (0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (0.0, 0.0))
+        inside = 0.0 < t_raw < 1.0
+        rho, r = self.hand.body_radius(ref), self.radius
+        out = np.empty((2, 7))
+        for j in range(7):
+            (de0, de1), (dw0, dw1) = de[j], dw[j]
+            e_de = e0 * de0 + e1 * de1
+            dt = (e0 * dw0 + e1 * dw1 + w0 * de0 + w1 * de1 - 2.0 * t * e_de) / L2 if inside else 0.0
+            dv0 = dw0 - t * de0 - e0 * dt
+            dv1 = dw1 - t * de1 - e1 * dt
+            d_angle_v = (-v1 * dv0 + v0 * dv1) / dist2  # the angle of v: of u and of gamma
+            d_angle_e = (-e1 * de0 + e0 * de1) / L2  # the angle of e: of the side's normal
+            d_sigma = -side * (L * dt + t * e_de / L) + rho * (d_angle_v - d_angle_e)
+            out[0, j] = (v0 * dv0 + v1 * dv1) / dist
+            out[1, j] = d_sigma + r * d_angle_v
+        out[1, 6] -= r  # beta = gamma - theta
+        return out
 
     def _rolling_jacobian(self, x: Array) -> Array:
         """``(2 n_roll, M + D)`` of :meth:`_rolling_rows`: the derivatives in the axis ends ``a``,
@@ -370,7 +383,7 @@ class ContactManifold:
         for k, roll in enumerate(self.rolls):
             ref = roll[1]
             a3, b3 = self.hand.body_segment(ref, q)
-            dz = self._roll_grad(k, a3[:2], b3[:2], c)  # (2, 7)
+            dz = self._roll_grad(k, a3, b3, c)  # (2, 7)
             Ja = self.hand.point_jacobian(ref, a3, q)[:2]  # (2, M)
             Jb = self.hand.point_jacobian(ref, b3, q)[:2]  # (2, M)
             rows = slice(2 * k, 2 * k + 2)
