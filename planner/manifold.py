@@ -96,6 +96,7 @@ class ContactManifold:
                  motion_space: Array | None = None, rolling: bool = False):
         self.hand, self.state, self.dim = hand, state, state.dim
         self.start: Pose = state.pose  # the object pose at s = 0
+        self._last_pose: tuple[bytes, Pose] | None = None  # _pose_at's
         self.M, self.D = hand.M, self.start.D
         self.items: list[tuple[BodyRef | None, Array, Array]] = []  # (finger body or None, point_body, point_obj)
         #: rolling contacts: (contact index, link, side +-1, sigma_0, gamma_0)
@@ -324,7 +325,7 @@ class ContactManifold:
         touching point's turn seen from the centre (``gamma - gamma_0``, within half a turn) minus
         the disk's turn ``s_theta`` (not wrapped: a disk may roll more than half a turn)."""
         q, s = x[: self.M], x[self.M:]
-        c = self.pose(s).position
+        c = self._pose_at(s).position
         out = np.empty(2 * len(self.rolls))
         for k, roll in enumerate(self.rolls):
             a, b = self.hand.body_segment(roll[1], q)
@@ -378,16 +379,15 @@ class ContactManifold:
         ``b``, the centre ``c`` and the turn (:meth:`_roll_grad`), times their Jacobians (``a``, ``b``
         points of the link, eq. 1; ``c = p_0 + s_xy``, the turn ``s_theta``)."""
         q, s = x[: self.M], x[self.M:]
-        c = self.pose(s).position
+        c = self._pose_at(s).position
         J = np.zeros((2 * len(self.rolls), self.M + self.D))
         for k, roll in enumerate(self.rolls):
             ref = roll[1]
             a3, b3 = self.hand.body_segment(ref, q)
             dz = self._roll_grad(k, a3, b3, c)  # (2, 7)
-            Ja = self.hand.point_jacobian(ref, a3, q)[:2]  # (2, M)
-            Jb = self.hand.point_jacobian(ref, b3, q)[:2]  # (2, M)
+            Jab = self.hand.point_jacobians(ref, np.vstack([a3, b3]), q)  # (2, 2, M): at a, at b
             rows = slice(2 * k, 2 * k + 2)
-            J[rows, : self.M] = dz[:, 0:2] @ Ja + dz[:, 2:4] @ Jb
+            J[rows, : self.M] = dz[:, 0:2] @ Jab[0] + dz[:, 2:4] @ Jab[1]
             J[rows, self.M: self.M + 2] = dz[:, 4:6]
             J[rows, self.M + 2] = dz[:, 6]
         return J
@@ -472,10 +472,21 @@ class ContactManifold:
         """The object pose at displacement ``s`` ``(D,)`` from the state's pose."""
         return self.start.displaced(s)
 
+    def _pose_at(self, s: Array) -> Pose:
+        """:meth:`pose`, remembered for the last ``s`` (exactly, by its bytes): ``F``, ``F'`` and their
+        rolling rows at one point share it (internal: the arrays are not to be modified)."""
+        key = np.asarray(s, dtype=float).tobytes()
+        last = self._last_pose
+        if last is not None and last[0] == key:
+            return last[1]
+        pose = self.start.displaced(s)
+        self._last_pose = (key, pose)
+        return pose
+
     def function(self, x: Array) -> Array:
         """``F(x)`` ``(rows,)``: sticking rows ``x_b,i(q) - x_o,i(s)``, then the sliding gaps."""
         q, s = x[: self.M], x[self.M:]
-        pose = self.pose(s)
+        pose = self._pose_at(s)
         d = self.dim
         out = np.empty(self.rows)
         for k, (ref, pb, po) in enumerate(self.items):
@@ -501,7 +512,7 @@ class ContactManifold:
     def jacobian(self, x: Array) -> Array:
         """``F'(x)`` ``(rows, M + D)``: ``[J_c, -G^T]`` at ``s = 0``."""
         q, s = x[: self.M], x[self.M:]
-        pose = self.pose(s)
+        pose = self._pose_at(s)
         R_d = pose.R_d  # (d, d)
         d = self.dim
         J = np.zeros((self.rows, self.M + self.D))  # (d n, M + D)
