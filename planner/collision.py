@@ -891,7 +891,18 @@ class CollisionModel:
     def start_allowance(self, finger: int, q: Array, position: Array, rotation: Array) -> Array:
         """The overlaps ``min(0, term)`` of :meth:`clearance_terms` at the start ``q`` of a motion
         (no link touching): a motion may keep them but not deepen them (see the module notes)."""
-        return np.minimum(0.0, self.clearance_terms(finger, q, position, rotation))
+        # remembered by what it reads (the hand configuration, the object pose, exactly): a state's
+        # allowances are asked for by every motion that starts there (the planar plan: 30 calls,
+        # 12 distinct); a copy is returned, so no caller changes another's
+        key = ("allowance", finger, np.asarray(q, dtype=float).tobytes(), np.asarray(position, dtype=float).tobytes(),
+               np.asarray(rotation, dtype=float).tobytes())
+        got = self._cache.get(key)
+        if got is None:
+            if len(self._cache) > 4096:
+                for k in [k for k in self._cache if k[0] == "allowance"]:
+                    del self._cache[k]
+            got = self._cache[key] = np.minimum(0.0, self.clearance_terms(finger, q, position, rotation))
+        return np.array(got)
 
     def clearance_terms(
         self,
