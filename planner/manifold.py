@@ -21,7 +21,7 @@ import numpy as np
 from analysis._types import Array
 from analysis.exceptions import SceneError
 from analysis.geometry import link_shapes, shape_normal_cone, shape_signed_distance
-from analysis.kinematics import BodyRef, HandKinematics
+from analysis.kinematics import BodyRef, HandKinematics, SerialChain
 from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
 from analysis.rotations import skew
@@ -175,6 +175,10 @@ class ContactManifold:
             if not self._implied_at_joint(k, sticking):
                 self._row_of[k] = len(self._row_of)
         self._base = self._slide0 + len(self._row_of)
+        #: per finger, the signs ``(n,)`` of its joint axes along z when every finger is a serial chain
+        #: turning about z in the plane (the scene's planar fingers): the Jacobian columns of a point
+        #: ``x`` are then ``a_j z x (x - p_j)`` in the plane (:meth:`_planar_columns`); else None
+        self._z_axes: list[Array] | None = self._planar_axes(hand) if self.dim == 2 else None
         #: rows of the contacts (without the direction's)
         self.contact_rows = self._base
         self.rows = self._base + self.complement.shape[1]
@@ -333,8 +337,12 @@ class ContactManifold:
         return out
 
     def _roll_grad(self, k: int, a: Array, b: Array, c: Array) -> Array:
-        """``(2, 7)``: the derivatives of :meth:`_roll_at` (gap, rolling row) in the axis ends ``a``,
-        ``b``, the centre ``c`` (``(2,)`` each) and the turn ``theta``. With ``e = b - a``,
+        """``(2, 7)``: :meth:`_roll_grad_rows` as an array."""
+        return np.array(self._roll_grad_rows(k, a, b, c))
+
+    def _roll_grad_rows(self, k: int, a: Array, b: Array, c: Array) -> tuple[list[float], list[float]]:
+        """The two rows (7 floats each) of the derivatives of :meth:`_roll_at` (gap, rolling row) in
+        the axis ends ``a``, ``b``, the centre ``c`` (``(2,)`` each) and the turn ``theta``. With ``e = b - a``,
         ``w = c - a``, the foot parameter ``t = w.e / |e|^2`` (held at 0 or 1 beyond the ends, where
         ``dt = 0``) and ``v = w - t e``: ``d|v| = u.dv``, the angle of ``v`` (of ``u``, of ``gamma``)
         changes by ``v_perp.dv / |v|^2`` and that of ``e`` (of the side's normal) by
@@ -359,7 +367,7 @@ class ContactManifold:
         dw = ((-1.0, 0.0), (0.0, -1.0), (0.0, 0.0), (0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (0.0, 0.0))
         inside = 0.0 < t_raw < 1.0
         rho, r = self.hand.body_radius(ref), self.radius
-        out = np.empty((2, 7))
+        gap_row, roll_row = [], []
         for j in range(7):
             (de0, de1), (dw0, dw1) = de[j], dw[j]
             e_de = e0 * de0 + e1 * de1
@@ -369,10 +377,10 @@ class ContactManifold:
             d_angle_v = (-v1 * dv0 + v0 * dv1) / dist2  # the angle of v: of u and of gamma
             d_angle_e = (-e1 * de0 + e0 * de1) / L2  # the angle of e: of the side's normal
             d_sigma = -side * (L * dt + t * e_de / L) + rho * (d_angle_v - d_angle_e)
-            out[0, j] = (v0 * dv0 + v1 * dv1) / dist
-            out[1, j] = d_sigma + r * d_angle_v
-        out[1, 6] -= r  # beta = gamma - theta
-        return out
+            gap_row.append((v0 * dv0 + v1 * dv1) / dist)
+            roll_row.append(d_sigma + r * d_angle_v)
+        roll_row[6] -= r  # beta = gamma - theta
+        return gap_row, roll_row
 
     def _rolling_jacobian(self, x: Array) -> Array:
         """``(2 n_roll, M + D)`` of :meth:`_rolling_rows`: the derivatives in the axis ends ``a``,
@@ -509,8 +517,81 @@ class ContactManifold:
         out[self._base:] = self.complement.T @ s  # on the line of the analysed direction
         return out
 
+    @staticmethod
+    def _planar_axes(hand: HandKinematics) -> list[Array] | None:
+        """The z-components ``(n,)`` of each finger's joint axes when every finger is a
+        :class:`~analysis.kinematics.SerialChain` whose joints all turn about z, exactly (axes
+        ``(0, 0, +-1)``, a base rotation about z): its world axes are then ``(0, 0, a_j)`` at every
+        configuration and its joints and links stay in the plane ``z = 0``; else None."""
+        out = []
+        for f in hand.fingers:
+            if not isinstance(f, SerialChain):
+                return None
+            R = f.base_R
+            if (np.any(f.axes[:, :2] != 0.0) or not np.all(np.abs(f.axes[:, 2]) == 1.0)
+                    or R[2, 2] != 1.0 or np.any(R[2, :2] != 0.0) or np.any(R[:2, 2] != 0.0)
+                    or f.base_p[2] != 0.0 or np.any(f.origins[:, 2] != 0.0)):
+                return None
+            out.append(np.array(f.axes[:, 2], dtype=float))
+        return out
+
+    def _add_planar_rows(self, J: Array, ref: BodyRef, q: Array,
+                         terms: Sequence[tuple[int, float, float, float, float]]) -> None:
+        """For planar serial chains (:meth:`_planar_axes`): add to ``J`` ``(rows, M + D)`` the
+        combinations ``g . J(x)`` of the Jacobian columns of world points ``x`` fixed on the body
+        ``ref``, each term ``(row, x_x, x_y, g_x, g_y)``. Eq. 1 in the plane: joint ``j`` (axis
+        ``a_j z``, at ``p_j``) moves ``x`` by ``a_j (-(x_y - p_j,y), x_x - p_j,x)`` per radian,
+        the values :meth:`HandKinematics.point_jacobian` gives (its ``x`` and ``y`` rows)."""
+        assert self._z_axes is not None and ref.finger is not None
+        f = ref.finger
+        off = int(self.hand.offsets[f])
+        chain = self.hand.fingers[f]
+        ps = chain.frames(q[off: off + chain.n_joints])[1]
+        axes = self._z_axes[f]
+        for j in range(ref.link + 1):
+            a_j = float(axes[j])
+            px, py = float(ps[j][0]), float(ps[j][1])
+            for row, x, y, gx, gy in terms:
+                J[row, off + j] += gx * -(a_j * (y - py)) + gy * (a_j * (x - px))
+
+    def _jacobian_planar(self, x: Array) -> Array:
+        """:meth:`jacobian` for planar serial chains (:meth:`_planar_axes`) in float arithmetic: the
+        Jacobian columns of the contact points and of the rolling links' axis ends in the plane
+        (:meth:`_add_planar_rows`); the sliding rows as :meth:`_sliding_jacobian`."""
+        M = self.M
+        q, s = x[:M], x[M:]
+        pose = self._pose_at(s)
+        R = pose.rotation
+        J = np.zeros((self.rows, M + self.D))  # (rows, M + 3)
+        for k, (ref, pb, po) in enumerate(self.items):
+            r = 2 * k
+            if ref is not None:
+                xb = self.hand.point_position(ref, pb, q)  # (2,)
+                bx, by = float(xb[0]), float(xb[1])
+                self._add_planar_rows(J, ref, q, ((r, bx, by, 1.0, 0.0), (r + 1, bx, by, 0.0, 1.0)))
+            J[r, M] = J[r + 1, M + 1] = -1.0
+            y = R[:2, :2] @ po  # object point relative to p_o, world frame
+            J[r, M + 2] = y[1]
+            J[r + 1, M + 2] = -y[0]
+        c = pose.position
+        for k, roll in enumerate(self.rolls):
+            ref = roll[1]
+            a, b = self.hand.body_segment(ref, q)
+            g0, g1 = self._roll_grad_rows(k, a, b, c)  # (7,) each: gap, rolling row
+            r = self._roll0 + 2 * k
+            ax, ay, bx, by = float(a[0]), float(a[1]), float(b[0]), float(b[1])
+            self._add_planar_rows(J, ref, q, ((r, ax, ay, g0[0], g0[1]), (r, bx, by, g0[2], g0[3]),
+                                              (r + 1, ax, ay, g1[0], g1[1]), (r + 1, bx, by, g1[2], g1[3])))
+            J[r, M: M + 3] = g0[4:7]
+            J[r + 1, M: M + 3] = g1[4:7]
+        self._sliding_jacobian(J, q, s, pose)
+        J[self._base:, M:] = self.complement.T
+        return J
+
     def jacobian(self, x: Array) -> Array:
         """``F'(x)`` ``(rows, M + D)``: ``[J_c, -G^T]`` at ``s = 0``."""
+        if self._z_axes is not None:
+            return self._jacobian_planar(x)
         q, s = x[: self.M], x[self.M:]
         pose = self._pose_at(s)
         R_d = pose.R_d  # (d, d)
@@ -528,6 +609,15 @@ class ContactManifold:
                 J[r, self.M + 3:] = skew(y) @ _left_jacobian_so3(s[3:])
         if self.rolls:
             J[self._roll0: self._slide0] = self._rolling_jacobian(x)
+        self._sliding_jacobian(J, q, s, pose)
+        J[self._base:, self.M:] = self.complement.T
+        return J
+
+
+    def _sliding_jacobian(self, J: Array, q: Array, s: Array, pose: Pose) -> None:
+        """The sliding contacts' rows of :meth:`jacobian`, written into ``J`` ``(rows, M + D)``."""
+        R_d = pose.R_d  # (d, d)
+        d = self.dim
         for k, ref in enumerate(self.sliding):  # d gap = u^T (d p_o - J(y) dq); the centre is p_o
             if k not in self._row_of:
                 continue
@@ -558,8 +648,6 @@ class ContactManifold:
             if ref.finger is not None:
                 J[row, : self.M] = -u @ self.hand.point_jacobian(ref, yb, q)
             J[row, self.M: self.M + d] = u
-        J[self._base:, self.M:] = self.complement.T
-        return J
 
 
 #: singular values of ``F'`` below this fraction of the largest are taken as zero by the Newton
