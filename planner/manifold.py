@@ -546,6 +546,7 @@ class ContactManifold:
         f = ref.finger
         off = int(self.hand.offsets[f])
         chain = self.hand.fingers[f]
+        assert isinstance(chain, SerialChain)  # _planar_axes holds for serial chains only
         ps = chain.frames(q[off: off + chain.n_joints])[1]
         axes = self._z_axes[f]
         for j in range(ref.link + 1):
