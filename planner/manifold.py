@@ -29,6 +29,8 @@ from analysis.scene import Box, Disk, Polygon, Scene, Sphere
 from planner.state import GraspState
 
 _EYE3 = np.eye(3)
+#: a planar point given by its first two coordinates (an array, or floats of :meth:`ContactManifold._planar_fk`)
+_Point = Array | Sequence[float]
 _EYE2 = np.eye(2)
 
 
@@ -179,6 +181,17 @@ class ContactManifold:
         #: turning about z in the plane (the scene's planar fingers): the Jacobian columns of a point
         #: ``x`` are then ``a_j z x (x - p_j)`` in the plane (:meth:`_planar_columns`); else None
         self._z_axes: list[Array] | None = self._planar_axes(hand) if self.dim == 2 else None
+        #: per finger for the planar float path (:meth:`_planar_fk`): base angle, first joint's
+        #: position, the link vectors (joint to joint, the last to the tip) and the axis signs
+        self._planar_chains: list[tuple[float, float, float, list[tuple[float, float]], list[float]]] = []
+        if self._z_axes is not None:
+            for f, axes in zip(hand.fingers, self._z_axes, strict=True):
+                assert isinstance(f, SerialChain)
+                p0 = f.base_p + f.base_R @ f.origins[0]  # (3,)
+                links = [(float(o[0]), float(o[1])) for o in (*f.origins[1:], f.tip)]
+                self._planar_chains.append((float(np.arctan2(f.base_R[1, 0], f.base_R[0, 0])), float(p0[0]),
+                                            float(p0[1]), links, [float(a) for a in axes]))
+        self._fk_last: tuple[bytes, list[list[tuple[float, float, float, float]]]] | None = None
         #: rows of the contacts (without the direction's)
         self.contact_rows = self._base
         self.rows = self._base + self.complement.shape[1]
@@ -303,7 +316,7 @@ class ContactManifold:
         psi = float(np.arctan2(n[0] * u[1] - n[1] * u[0], n @ u))
         return -side * t * L + self.hand.body_radius(ref) * psi, float(np.arctan2(-u[1], -u[0]))
 
-    def _roll_at(self, k: int, a: Array, b: Array, c: Array, theta: float) -> tuple[float, float]:
+    def _roll_at(self, k: int, a: _Point, b: _Point, c: _Point, theta: float) -> tuple[float, float]:
         """Rolling contact ``k``'s gap and rolling row (see :meth:`_rolling_rows`) for the link's
         axis ``a -> b``, the disk centre ``c`` (``(2,)`` each) and the disk's turn ``theta`` from
         the start (:meth:`body_distance` and :meth:`_roll_coords` in one; plain float arithmetic:
@@ -340,7 +353,7 @@ class ContactManifold:
         """``(2, 7)``: :meth:`_roll_grad_rows` as an array."""
         return np.array(self._roll_grad_rows(k, a, b, c))
 
-    def _roll_grad_rows(self, k: int, a: Array, b: Array, c: Array) -> tuple[list[float], list[float]]:
+    def _roll_grad_rows(self, k: int, a: _Point, b: _Point, c: _Point) -> tuple[list[float], list[float]]:
         """The two rows (7 floats each) of the derivatives of :meth:`_roll_at` (gap, rolling row) in
         the axis ends ``a``, ``b``, the centre ``c`` (``(2,)`` each) and the turn ``theta``. With ``e = b - a``,
         ``w = c - a``, the foot parameter ``t = w.e / |e|^2`` (held at 0 or 1 beyond the ends, where
@@ -491,8 +504,65 @@ class ContactManifold:
         self._last_pose = (key, pose)
         return pose
 
+    def _planar_fk(self, q: Array) -> list[list[tuple[float, float, float, float]]]:
+        """Planar serial chains (:meth:`_planar_axes`) in float arithmetic: per finger, per joint
+        ``j`` and one more for the tip, ``(x, y, cos, sin)`` of the joint's position and of the
+        world angle ``theta_j = theta_base + sum_{i <= j} a_i q_i`` of link ``j`` (the tip entry
+        repeats the last link's angle); remembered for the last ``q`` (by its bytes)."""
+        key = np.asarray(q, dtype=float).tobytes()
+        last = self._fk_last
+        if last is not None and last[0] == key:
+            return last[1]
+        ql = np.asarray(q, dtype=float).tolist()
+        out = []
+        for f, (theta, px, py, links, axes) in enumerate(self._planar_chains):
+            off = int(self.hand.offsets[f])
+            joints = []
+            c = sn = 0.0
+            for j, (vx, vy) in enumerate(links):
+                theta += axes[j] * ql[off + j]
+                c, sn = math.cos(theta), math.sin(theta)
+                joints.append((px, py, c, sn))
+                px, py = px + c * vx - sn * vy, py + sn * vx + c * vy
+            joints.append((px, py, c, sn))
+            out.append(joints)
+        self._fk_last = (key, out)
+        return out
+
+    def _function_planar(self, x: Array) -> Array:
+        """:meth:`function` for planar serial chains (:meth:`_planar_axes`) without sliding
+        contacts, in float arithmetic (:meth:`_planar_fk`; the object at ``p_o + s_xy`` turned by
+        ``theta_0 + s_theta``)."""
+        M = self.M
+        q, s = x[:M], x[M:]
+        fk = self._planar_fk(q)
+        sx, sy, st = (float(v) for v in s[:3])
+        ox, oy = float(self.start.position[0]) + sx, float(self.start.position[1]) + sy
+        th = math.atan2(float(self.start.rotation[1, 0]), float(self.start.rotation[0, 0])) + st
+        oc, os_ = math.cos(th), math.sin(th)
+        out = np.empty(self.rows)
+        for k, (ref, pb, po) in enumerate(self.items):
+            if ref is None:
+                bx, by = float(pb[0]), float(pb[1])
+            else:
+                assert ref.finger is not None
+                px, py, c, sn = fk[ref.finger][ref.link]
+                bx = px + c * float(pb[0]) - sn * float(pb[1])
+                by = py + sn * float(pb[0]) + c * float(pb[1])
+            out[2 * k] = bx - (ox + oc * float(po[0]) - os_ * float(po[1]))
+            out[2 * k + 1] = by - (oy + os_ * float(po[0]) + oc * float(po[1]))
+        for k, roll in enumerate(self.rolls):
+            ref = roll[1]
+            assert ref.finger is not None
+            a, b = fk[ref.finger][ref.link], fk[ref.finger][ref.link + 1]
+            out[self._roll0 + 2 * k: self._roll0 + 2 * k + 2] = self._roll_at(k, a, b, (ox, oy), st)
+        out[self._base:] = self.complement.T @ s  # on the line of the analysed direction
+        return out
+
     def function(self, x: Array) -> Array:
         """``F(x)`` ``(rows,)``: sticking rows ``x_b,i(q) - x_o,i(s)``, then the sliding gaps."""
+        if self._z_axes is not None and not self.sliding:
+            return self._function_planar(x)
         q, s = x[: self.M], x[self.M:]
         pose = self._pose_at(s)
         d = self.dim
@@ -545,13 +615,11 @@ class ContactManifold:
         assert self._z_axes is not None and ref.finger is not None
         f = ref.finger
         off = int(self.hand.offsets[f])
-        chain = self.hand.fingers[f]
-        assert isinstance(chain, SerialChain)  # _planar_axes holds for serial chains only
-        ps = chain.frames(q[off: off + chain.n_joints])[1]
-        axes = self._z_axes[f]
+        joints = self._planar_fk(q)[f]
+        axes = self._planar_chains[f][4]
         for j in range(ref.link + 1):
-            a_j = float(axes[j])
-            px, py = float(ps[j][0]), float(ps[j][1])
+            a_j = axes[j]
+            px, py = joints[j][0], joints[j][1]
             for row, x, y, gx, gy in terms:
                 J[row, off + j] += gx * -(a_j * (y - py)) + gy * (a_j * (x - px))
 
@@ -564,11 +632,14 @@ class ContactManifold:
         pose = self._pose_at(s)
         R = pose.rotation
         J = np.zeros((self.rows, M + self.D))  # (rows, M + 3)
+        fk = self._planar_fk(q)
         for k, (ref, pb, po) in enumerate(self.items):
             r = 2 * k
             if ref is not None:
-                xb = self.hand.point_position(ref, pb, q)  # (2,)
-                bx, by = float(xb[0]), float(xb[1])
+                assert ref.finger is not None
+                px, py, co, sn = fk[ref.finger][ref.link]
+                bx = px + co * float(pb[0]) - sn * float(pb[1])
+                by = py + sn * float(pb[0]) + co * float(pb[1])
                 self._add_planar_rows(J, ref, q, ((r, bx, by, 1.0, 0.0), (r + 1, bx, by, 0.0, 1.0)))
             J[r, M] = J[r + 1, M + 1] = -1.0
             y = R[:2, :2] @ po  # object point relative to p_o, world frame
@@ -577,7 +648,8 @@ class ContactManifold:
         c = pose.position
         for k, roll in enumerate(self.rolls):
             ref = roll[1]
-            a, b = self.hand.body_segment(ref, q)
+            assert ref.finger is not None
+            a, b = fk[ref.finger][ref.link], fk[ref.finger][ref.link + 1]
             g0, g1 = self._roll_grad_rows(k, a, b, c)  # (7,) each: gap, rolling row
             r = self._roll0 + 2 * k
             ax, ay, bx, by = float(a[0]), float(a[1]), float(b[0]), float(b[1])

@@ -53,11 +53,12 @@ def test_spatial_manifold_jacobian_matches_finite_differences() -> None:
 
 
 
-def test_planar_jacobian_equals_the_generic_one() -> None:
+def test_planar_function_and_jacobian_equal_the_generic_ones() -> None:
     """For planar serial chains F' is assembled in float arithmetic from the joints' positions
-    (``_jacobian_planar``); it equals the generic assembly from ``HandKinematics.point_jacobian``
-    to round-off, with glued and rolling contacts, a disk sliding on the palm, with and without the
-    direction rows, at random points; a spatial hand has no planar path."""
+    (``_jacobian_planar``) and, without sliding contacts, F too (``_function_planar``, its own
+    forward kinematics); they equal the generic evaluation (``HandKinematics``' forward kinematics
+    and point Jacobians) to round-off, with glued and rolling contacts, a disk sliding on the
+    palm, with and without the direction rows, at random points; a spatial hand has no planar path."""
     scene = load_scene(EXAMPLES / "planar_disk_envelope.json")
     hand = HandKinematics.from_scene(scene)
     st = state_from_scene(scene, hand)
@@ -73,11 +74,12 @@ def test_planar_jacobian_equals_the_generic_one() -> None:
         x0 = np.concatenate([st.q, np.zeros(man.D)])
         for _ in range(5):
             x = x0 + 0.05 * rng.standard_normal(len(x0))
-            J = man.jacobian(x)
+            J, F = man.jacobian(x), man.function(x)
             z, man._z_axes = man._z_axes, None
-            J_generic = man.jacobian(x)
+            J_generic, F_generic = man.jacobian(x), man.function(x)
             man._z_axes = z
             np.testing.assert_allclose(J, J_generic, rtol=0, atol=1e-14)
+            np.testing.assert_allclose(F, F_generic, rtol=0, atol=1e-15)
     spatial = load_scene(EXAMPLES / "sphere_four_finger_palm.json")
     sh = HandKinematics.from_scene(spatial)
     assert ContactManifold(sh, state_from_scene(spatial, sh), [0])._z_axes is None
