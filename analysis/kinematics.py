@@ -142,6 +142,19 @@ class SerialChain:
         J[2, :m] = A[:, 0] * r[:, 1] - A[:, 1] * r[:, 0]
         return J
 
+    def point_jacobians(self, k: int, X: Array, q: Array) -> Array:
+        """``(p, 3, n)``: :meth:`point_jacobian` of each world point of ``X`` ``(p, 3)`` fixed on body
+        ``k``, in one pass (the same products, element by element)."""
+        A, P = self._world_axes(q)  # (n, 3) each
+        m = k + 1
+        A = A[:m]
+        R = np.asarray(X, dtype=float)[:, None, :] - P[:m]  # (p, k + 1, 3)
+        J = np.zeros((R.shape[0], 3, self.n_joints))  # (p, 3, n)
+        J[:, 0, :m] = A[:, 1] * R[:, :, 2] - A[:, 2] * R[:, :, 1]
+        J[:, 1, :m] = A[:, 2] * R[:, :, 0] - A[:, 0] * R[:, :, 2]
+        J[:, 2, :m] = A[:, 0] * R[:, :, 1] - A[:, 1] * R[:, :, 0]
+        return J
+
     def body_segment(self, k: int, q: Array) -> tuple[Array, Array]:
         Rs, ps = self.frames(q)
         end_local = self.origins[k + 1] if k + 1 < self.n_joints else self.tip
@@ -303,6 +316,23 @@ class HandKinematics:
             sl = self.finger_slice(ref.finger)
             J[:, sl] = f.point_jacobian(ref.link, _as3(x), q[sl])
         return J[: self.dim]
+
+    def point_jacobians(self, ref: BodyRef, X: Array, q: Array) -> Array:
+        """``(p, d, M)``: :meth:`point_jacobian` of each world point of ``X`` ``(p, d)`` fixed on the
+        body (one pass for a finger that has ``point_jacobians``, as :class:`SerialChain`)."""
+        X = np.asarray(X, dtype=float)
+        J = np.zeros((X.shape[0], 3, self.M))  # (p, 3, M)
+        if ref.finger is not None:
+            f = self.fingers[ref.finger]
+            sl = self.finger_slice(ref.finger)
+            X3 = X if X.shape[1] == 3 else np.column_stack([X, np.zeros(X.shape[0])])  # (p, 3)
+            many = getattr(f, "point_jacobians", None)
+            if many is not None:
+                J[:, :, sl] = many(ref.link, X3, q[sl])
+            else:
+                for i, x in enumerate(X3):
+                    J[i, :, sl] = f.point_jacobian(ref.link, x, q[sl])
+        return J[:, : self.dim]
 
     def body_segment(self, ref: BodyRef, q: Array) -> tuple[Array, Array]:
         assert ref.finger is not None

@@ -186,16 +186,19 @@ def shape_signed_distances(shape: object, P: Array, dim: int) -> Array:
     frame (:func:`analysis.geometry.shape_signed_distance`, vectorised for disks, spheres, boxes
     and segments); ``inf`` for shapes without a distance (meshes)."""
     P = np.asarray(P, dtype=float)[:, :dim]
+    # clip to [0, 1] and the norm along axis 1 as np.clip and np.linalg.norm compute them (the same
+    # values: max then min, the square root of the sum of squares), without their call overhead
     if isinstance(shape, Disk | Sphere):
-        return np.asarray(np.linalg.norm(P, axis=1) - shape.radius)
+        return np.sqrt((P * P).sum(axis=1)) - shape.radius
     if isinstance(shape, Box):
         c = np.asarray(shape.position if shape.position is not None else np.zeros(dim), dtype=float)[:dim]
         return np.asarray(box_signed_distance(P, c, np.asarray(shape.size, dtype=float)[:dim] / 2.0))
     if isinstance(shape, Segment):
         a, b = (np.asarray(x, dtype=float)[:dim] for x in shape.points)
         e = b - a
-        t = np.clip((P - a) @ e / max(float(e @ e), 1e-300), 0.0, 1.0)
-        return np.asarray(np.linalg.norm(P - (a + t[:, None] * e), axis=1))
+        t = np.minimum(np.maximum((P - a) @ e / max(float(e @ e), 1e-300), 0.0), 1.0)
+        V = P - (a + t[:, None] * e)
+        return np.sqrt((V * V).sum(axis=1))
     out = [shape_signed_distance(shape, p, dim) for p in P]
     return np.array([np.inf if v is None else v for v in out], dtype=float)
 
@@ -891,7 +894,18 @@ class CollisionModel:
     def start_allowance(self, finger: int, q: Array, position: Array, rotation: Array) -> Array:
         """The overlaps ``min(0, term)`` of :meth:`clearance_terms` at the start ``q`` of a motion
         (no link touching): a motion may keep them but not deepen them (see the module notes)."""
-        return np.minimum(0.0, self.clearance_terms(finger, q, position, rotation))
+        # remembered by what it reads (the hand configuration, the object pose, exactly): a state's
+        # allowances are asked for by every motion that starts there (the planar plan: 30 calls,
+        # 12 distinct); a copy is returned, so no caller changes another's
+        key = ("allowance", finger, np.asarray(q, dtype=float).tobytes(), np.asarray(position, dtype=float).tobytes(),
+               np.asarray(rotation, dtype=float).tobytes())
+        got = self._cache.get(key)
+        if got is None:
+            if len(self._cache) > 4096:
+                for k in [k for k in self._cache if k[0] == "allowance"]:
+                    del self._cache[k]
+            got = self._cache[key] = np.minimum(0.0, self.clearance_terms(finger, q, position, rotation))
+        return np.array(got)
 
     def clearance_terms(
         self,

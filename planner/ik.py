@@ -112,6 +112,64 @@ def alignment_bound(chain: SerialChain, target: Array) -> Array | None:
     return np.asarray(c / nc)
 
 
+#: a planar IK target (:func:`planar_reach_gap`) out of reach by more than this (scene units) is
+#: not solved, and the alignment asked for is relaxed by :data:`PLANAR_ALIGNMENT_SLACK` for the
+#: test: a solve IPOPT calls a success violates each constraint by at most its
+#: ``acceptable_constr_viol_tol`` (1e-2, absolute; ``constr_viol_tol`` is 1e-4), so its tip lies
+#: within sqrt(2) 1e-2 of the target and its alignment at most 1e-2 below the one asked for: no
+#: solve that could succeed is skipped
+PLANAR_REACH_MARGIN = 2e-2
+PLANAR_ALIGNMENT_SLACK = 1e-2
+
+
+def planar_reach_gap(chain: SerialChain, target: Array, normal: Array, min_alignment: float) -> float | None:
+    """For a planar chain (joint axes along the world z, links in the xy-plane, no joint limits),
+    how far (scene units) the tip's ``target`` ``(2,)`` lies out of reach for every direction ``u``
+    of the last link with ``u . normal >= min_alignment``; 0 where some direction reaches it,
+    ``inf`` where no direction is aligned. ``None`` for any other chain.
+
+    The last joint ``w = target - L_n u`` must lie in the annulus the first ``n - 1`` links reach
+    about the first joint ``p_0``: radii ``[max(0, 2 max L_k - sum L_k), sum L_k]`` (``[0, 0]`` for
+    one link), the last link turning freely about it. Over the arc of aligned directions,
+    ``|c - L_n u|`` (``c = target - p_0``) runs continuously between its values where ``c . u`` is
+    largest and smallest on the arc (at ``u`` along ``+-c`` when the arc holds it, else at an end
+    of the arc); the gap is the distance of that interval from the annulus."""
+    Rb = chain.base_R
+    if abs(abs(float(Rb[2, 2])) - 1.0) > 1e-12 or np.any(np.abs(chain.axes[:, :2]) > 1e-12):
+        return None  # the base turns the plane, or a joint does not turn about z
+    if np.any(np.abs(chain.origins[1:, 2]) > 1e-12) or abs(float(chain.tip[2])) > 1e-12:
+        return None  # a link leaves the plane
+    if np.any(np.abs(chain.axes[:, 2]) < 1e-12) or getattr(chain, "lower", None) is not None:
+        return None
+    lengths = [float(np.linalg.norm(o[:2])) for o in chain.origins[1:]]  # (n - 1,) joint to joint
+    L_n = float(np.linalg.norm(chain.tip[:2]))
+    r_hi = float(sum(lengths))
+    r_lo = max(0.0, 2.0 * max(lengths, default=0.0) - r_hi)
+    p0 = (chain.base_p + Rb @ chain.origins[0])[:2]
+    c = np.asarray(target, dtype=float)[:2] - p0  # (2,)
+    nrm = np.asarray(normal, dtype=float)[:2]
+    n_len = float(np.linalg.norm(nrm))
+    if n_len == 0.0:
+        return 0.0 if min_alignment <= 0.0 else float("inf")
+    cos_half = min_alignment / n_len
+    if cos_half > 1.0:
+        return float("inf")
+    half = float(np.arccos(max(cos_half, -1.0)))  # the arc: angles within `half` of the normal's
+    phi_n = float(np.arctan2(nrm[1], nrm[0]))
+    c_len = float(np.linalg.norm(c))
+    phi_c = float(np.arctan2(c[1], c[0]))
+
+    def within(phi: float) -> bool:
+        return abs((phi - phi_n + np.pi) % (2 * np.pi) - np.pi) <= half
+
+    ends = [c_len * float(np.cos(phi_n + s * half - phi_c)) for s in (-1.0, 1.0)]  # c . u at the arc's ends
+    dot_hi = c_len if within(phi_c) else max(ends)
+    dot_lo = -c_len if within(phi_c + np.pi) else min(ends)
+    g_lo = float(np.sqrt(max(c_len**2 + L_n**2 - 2.0 * L_n * dot_hi, 0.0)))
+    g_hi = float(np.sqrt(max(c_len**2 + L_n**2 - 2.0 * L_n * dot_lo, 0.0)))
+    return max(r_lo - g_hi, g_lo - r_hi, 0.0)
+
+
 #: IK target alignment that no solution can reach by this much is not solved (IPOPT's constraint
 #: tolerance is 1e-4 at most, so no solve that could succeed is skipped)
 ALIGNMENT_MARGIN = 1e-3
@@ -211,6 +269,10 @@ def fingertip_ik(
         nu = np.asarray(normal, dtype=float)[:3] / float(np.linalg.norm(normal))
         if float(np.linalg.norm(nu - (nu @ plane) * plane)) < min_alignment - ALIGNMENT_MARGIN:
             return out
+    if d == 2:
+        gap = planar_reach_gap(chain, target, normal, min_alignment - PLANAR_ALIGNMENT_SLACK)
+        if gap is not None and gap > PLANAR_REACH_MARGIN:
+            return out  # no configuration puts the tip there with the last link aligned
     solver = _ik_solver(chain, d)
     lbg = np.r_[np.zeros(d), min_alignment]
     ubg = np.r_[np.zeros(d), np.inf]

@@ -13,6 +13,7 @@ Jacobian at ``s = 0`` is ``A_c`` (eq. 19), so its tangent space there is the mot
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -20,7 +21,7 @@ import numpy as np
 from analysis._types import Array
 from analysis.exceptions import SceneError
 from analysis.geometry import link_shapes, shape_normal_cone, shape_signed_distance
-from analysis.kinematics import BodyRef, HandKinematics
+from analysis.kinematics import BodyRef, HandKinematics, SerialChain
 from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
 from analysis.rotations import skew
@@ -28,6 +29,8 @@ from analysis.scene import Box, Disk, Polygon, Scene, Sphere
 from planner.state import GraspState
 
 _EYE3 = np.eye(3)
+#: a planar point given by its first two coordinates (an array, or floats of :meth:`ContactManifold._planar_fk`)
+_Point = Array | Sequence[float]
 _EYE2 = np.eye(2)
 
 
@@ -95,6 +98,7 @@ class ContactManifold:
                  motion_space: Array | None = None, rolling: bool = False):
         self.hand, self.state, self.dim = hand, state, state.dim
         self.start: Pose = state.pose  # the object pose at s = 0
+        self._last_pose: tuple[bytes, Pose] | None = None  # _pose_at's
         self.M, self.D = hand.M, self.start.D
         self.items: list[tuple[BodyRef | None, Array, Array]] = []  # (finger body or None, point_body, point_obj)
         #: rolling contacts: (contact index, link, side +-1, sigma_0, gamma_0)
@@ -173,6 +177,21 @@ class ContactManifold:
             if not self._implied_at_joint(k, sticking):
                 self._row_of[k] = len(self._row_of)
         self._base = self._slide0 + len(self._row_of)
+        #: per finger, the signs ``(n,)`` of its joint axes along z when every finger is a serial chain
+        #: turning about z in the plane (the scene's planar fingers): the Jacobian columns of a point
+        #: ``x`` are then ``a_j z x (x - p_j)`` in the plane (:meth:`_planar_columns`); else None
+        self._z_axes: list[Array] | None = self._planar_axes(hand) if self.dim == 2 else None
+        #: per finger for the planar float path (:meth:`_planar_fk`): base angle, first joint's
+        #: position, the link vectors (joint to joint, the last to the tip) and the axis signs
+        self._planar_chains: list[tuple[float, float, float, list[tuple[float, float]], list[float]]] = []
+        if self._z_axes is not None:
+            for f, axes in zip(hand.fingers, self._z_axes, strict=True):
+                assert isinstance(f, SerialChain)
+                p0 = f.base_p + f.base_R @ f.origins[0]  # (3,)
+                links = [(float(o[0]), float(o[1])) for o in (*f.origins[1:], f.tip)]
+                self._planar_chains.append((float(np.arctan2(f.base_R[1, 0], f.base_R[0, 0])), float(p0[0]),
+                                            float(p0[1]), links, [float(a) for a in axes]))
+        self._fk_last: tuple[bytes, list[list[tuple[float, float, float, float]]]] | None = None
         #: rows of the contacts (without the direction's)
         self.contact_rows = self._base
         self.rows = self._base + self.complement.shape[1]
@@ -297,23 +316,25 @@ class ContactManifold:
         psi = float(np.arctan2(n[0] * u[1] - n[1] * u[0], n @ u))
         return -side * t * L + self.hand.body_radius(ref) * psi, float(np.arctan2(-u[1], -u[0]))
 
-    def _roll_at(self, k: int, a: Array, b: Array, c: Array, theta: float) -> tuple[float, float]:
+    def _roll_at(self, k: int, a: _Point, b: _Point, c: _Point, theta: float) -> tuple[float, float]:
         """Rolling contact ``k``'s gap and rolling row (see :meth:`_rolling_rows`) for the link's
-        axis ``a -> b`` ``(2,)`` each, the disk centre ``c`` ``(2,)`` and the disk's turn ``theta``
-        from the start (:meth:`body_distance` and :meth:`_roll_coords` in one)."""
+        axis ``a -> b``, the disk centre ``c`` (``(2,)`` each) and the disk's turn ``theta`` from
+        the start (:meth:`body_distance` and :meth:`_roll_coords` in one; plain float arithmetic:
+        a projection evaluates it a few hundred times per motion)."""
         _, ref, side, sig0, gamma0 = self.rolls[k]
-        e = b - a  # (2,)
-        L = float(np.hypot(e[0], e[1]))
-        eh = e / L
-        t = min(max(float((c - a) @ eh) / L, 0.0), 1.0)
-        v = c - (a + t * L * eh)  # (2,) from the closest axis point to the centre
-        dist = float(np.hypot(v[0], v[1]))
-        u = v / max(dist, 1e-300)
+        a0, a1 = float(a[0]), float(a[1])
+        e0, e1 = float(b[0]) - a0, float(b[1]) - a1
+        w0, w1 = float(c[0]) - a0, float(c[1]) - a1
+        L = math.hypot(e0, e1)
+        t = min(max((w0 * e0 + w1 * e1) / (L * L), 0.0), 1.0)
+        v0, v1 = w0 - t * e0, w1 - t * e1  # from the closest axis point to the centre
+        dist = math.hypot(v0, v1)
+        u0, u1 = v0 / max(dist, 1e-300), v1 / max(dist, 1e-300)
         r_link = self.hand.body_radius(ref)
-        n0, n1 = -side * eh[1], side * eh[0]  # the side's outward normal
-        psi = float(np.arctan2(n0 * u[1] - n1 * u[0], n0 * u[0] + n1 * u[1]))
-        sig, gamma = -side * t * L + r_link * psi, float(np.arctan2(-u[1], -u[0]))
-        dbeta = (gamma - gamma0 + np.pi) % (2 * np.pi) - np.pi - theta
+        n0, n1 = -side * e1 / L, side * e0 / L  # the side's outward normal
+        psi = math.atan2(n0 * u1 - n1 * u0, n0 * u0 + n1 * u1)
+        sig, gamma = -side * t * L + r_link * psi, math.atan2(-u1, -u0)
+        dbeta = (gamma - gamma0 + math.pi) % (2 * math.pi) - math.pi - theta
         return dist - r_link - self.radius, (sig - sig0) + self.radius * dbeta
 
     def _rolling_rows(self, x: Array) -> Array:
@@ -321,60 +342,73 @@ class ContactManifold:
         touching point's turn seen from the centre (``gamma - gamma_0``, within half a turn) minus
         the disk's turn ``s_theta`` (not wrapped: a disk may roll more than half a turn)."""
         q, s = x[: self.M], x[self.M:]
-        c = self.pose(s).position
+        c = self._pose_at(s).position
         out = np.empty(2 * len(self.rolls))
         for k, roll in enumerate(self.rolls):
             a, b = self.hand.body_segment(roll[1], q)
-            out[2 * k: 2 * k + 2] = self._roll_at(k, a[:2], b[:2], c, float(s[2]))
+            out[2 * k: 2 * k + 2] = self._roll_at(k, a, b, c, float(s[2]))
         return out
 
     def _roll_grad(self, k: int, a: Array, b: Array, c: Array) -> Array:
-        """``(2, 7)``: the derivatives of :meth:`_roll_at` (gap, rolling row) in the axis ends ``a``,
-        ``b``, the centre ``c`` (``(2,)`` each) and the turn ``theta``. With ``e = b - a``,
+        """``(2, 7)``: :meth:`_roll_grad_rows` as an array."""
+        return np.array(self._roll_grad_rows(k, a, b, c))
+
+    def _roll_grad_rows(self, k: int, a: _Point, b: _Point, c: _Point) -> tuple[list[float], list[float]]:
+        """The two rows (7 floats each) of the derivatives of :meth:`_roll_at` (gap, rolling row) in
+        the axis ends ``a``, ``b``, the centre ``c`` (``(2,)`` each) and the turn ``theta``. With ``e = b - a``,
         ``w = c - a``, the foot parameter ``t = w.e / |e|^2`` (held at 0 or 1 beyond the ends, where
         ``dt = 0``) and ``v = w - t e``: ``d|v| = u.dv``, the angle of ``v`` (of ``u``, of ``gamma``)
         changes by ``v_perp.dv / |v|^2`` and that of ``e`` (of the side's normal) by
-        ``e_perp.de / |e|^2``, ``psi`` by their difference, ``sigma = -side t |e| + rho psi``."""
+        ``e_perp.de / |e|^2``, ``psi`` by their difference, ``sigma = -side t |e| + rho psi``.
+
+        In plain float arithmetic, ``z = (a, b, c, theta)``: ``de/dz = [-I, I, 0, 0]``,
+        ``dw/dz = [-I, 0, I, 0]``, so ``dt = (e.dw + w.de - 2 t e.de) / |e|^2`` and
+        ``dv = dw - t de - e dt`` column by column."""
         _, ref, side, _, _ = self.rolls[k]
-        e = b - a  # (2,)
-        w = c - a  # (2,)
-        L2 = float(e @ e)
-        L = float(np.sqrt(L2))
-        t_raw = float(w @ e) / L2
+        a0, a1 = float(a[0]), float(a[1])
+        e0, e1 = float(b[0]) - a0, float(b[1]) - a1
+        w0, w1 = float(c[0]) - a0, float(c[1]) - a1
+        L2 = e0 * e0 + e1 * e1
+        L = math.sqrt(L2)
+        t_raw = (w0 * e0 + w1 * e1) / L2
         t = min(max(t_raw, 0.0), 1.0)
-        v = w - t * e  # (2,) from the foot on the axis to the centre
-        dist2 = float(v @ v)
-        De = np.zeros((2, 7))  # d e / d z, z = (a, b, c, theta)
-        De[:, 0:2] = -_EYE2
-        De[:, 2:4] = _EYE2
-        Dw = np.zeros((2, 7))  # d w / d z
-        Dw[:, 0:2] = -_EYE2
-        Dw[:, 4:6] = _EYE2
-        dt = (e @ Dw + w @ De - 2.0 * t * (e @ De)) / L2 if 0.0 < t_raw < 1.0 else np.zeros(7)  # (7,)
-        Dv = Dw - t * De - np.outer(e, dt)  # (2, 7)
-        d_dist = (v @ Dv) / np.sqrt(dist2)  # (7,)
-        d_angle_v = np.array([-v[1], v[0]]) @ Dv / dist2  # (7,) the angle of v: of u and of gamma
-        d_angle_e = np.array([-e[1], e[0]]) @ De / L2  # (7,) the angle of e: of the side's normal
-        d_sigma = -side * (L * dt + t * (e @ De) / L) + self.hand.body_radius(ref) * (d_angle_v - d_angle_e)
-        d_roll = d_sigma + self.radius * d_angle_v
-        d_roll[6] -= self.radius  # beta = gamma - theta
-        return np.vstack([d_dist, d_roll])
+        v0, v1 = w0 - t * e0, w1 - t * e1  # from the foot on the axis to the centre
+        dist2 = v0 * v0 + v1 * v1
+        dist = math.sqrt(dist2)
+        # the columns of de/dz and dw/dz, as (x, y) pairs over z = (a_x, a_y, b_x, b_y, c_x, c_y, theta)
+        de = ((-1.0, 0.0), (0.0, -1.0), (1.0, 0.0), (0.0, 1.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))
+        dw = ((-1.0, 0.0), (0.0, -1.0), (0.0, 0.0), (0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (0.0, 0.0))
+        inside = 0.0 < t_raw < 1.0
+        rho, r = self.hand.body_radius(ref), self.radius
+        gap_row, roll_row = [], []
+        for j in range(7):
+            (de0, de1), (dw0, dw1) = de[j], dw[j]
+            e_de = e0 * de0 + e1 * de1
+            dt = (e0 * dw0 + e1 * dw1 + w0 * de0 + w1 * de1 - 2.0 * t * e_de) / L2 if inside else 0.0
+            dv0 = dw0 - t * de0 - e0 * dt
+            dv1 = dw1 - t * de1 - e1 * dt
+            d_angle_v = (-v1 * dv0 + v0 * dv1) / dist2  # the angle of v: of u and of gamma
+            d_angle_e = (-e1 * de0 + e0 * de1) / L2  # the angle of e: of the side's normal
+            d_sigma = -side * (L * dt + t * e_de / L) + rho * (d_angle_v - d_angle_e)
+            gap_row.append((v0 * dv0 + v1 * dv1) / dist)
+            roll_row.append(d_sigma + r * d_angle_v)
+        roll_row[6] -= r  # beta = gamma - theta
+        return gap_row, roll_row
 
     def _rolling_jacobian(self, x: Array) -> Array:
         """``(2 n_roll, M + D)`` of :meth:`_rolling_rows`: the derivatives in the axis ends ``a``,
         ``b``, the centre ``c`` and the turn (:meth:`_roll_grad`), times their Jacobians (``a``, ``b``
         points of the link, eq. 1; ``c = p_0 + s_xy``, the turn ``s_theta``)."""
         q, s = x[: self.M], x[self.M:]
-        c = self.pose(s).position
+        c = self._pose_at(s).position
         J = np.zeros((2 * len(self.rolls), self.M + self.D))
         for k, roll in enumerate(self.rolls):
             ref = roll[1]
             a3, b3 = self.hand.body_segment(ref, q)
-            dz = self._roll_grad(k, a3[:2], b3[:2], c)  # (2, 7)
-            Ja = self.hand.point_jacobian(ref, a3, q)[:2]  # (2, M)
-            Jb = self.hand.point_jacobian(ref, b3, q)[:2]  # (2, M)
+            dz = self._roll_grad(k, a3, b3, c)  # (2, 7)
+            Jab = self.hand.point_jacobians(ref, np.vstack([a3, b3]), q)  # (2, 2, M): at a, at b
             rows = slice(2 * k, 2 * k + 2)
-            J[rows, : self.M] = dz[:, 0:2] @ Ja + dz[:, 2:4] @ Jb
+            J[rows, : self.M] = dz[:, 0:2] @ Jab[0] + dz[:, 2:4] @ Jab[1]
             J[rows, self.M: self.M + 2] = dz[:, 4:6]
             J[rows, self.M + 2] = dz[:, 6]
         return J
@@ -459,10 +493,78 @@ class ContactManifold:
         """The object pose at displacement ``s`` ``(D,)`` from the state's pose."""
         return self.start.displaced(s)
 
+    def _pose_at(self, s: Array) -> Pose:
+        """:meth:`pose`, remembered for the last ``s`` (exactly, by its bytes): ``F``, ``F'`` and their
+        rolling rows at one point share it (internal: the arrays are not to be modified)."""
+        key = np.asarray(s, dtype=float).tobytes()
+        last = self._last_pose
+        if last is not None and last[0] == key:
+            return last[1]
+        pose = self.start.displaced(s)
+        self._last_pose = (key, pose)
+        return pose
+
+    def _planar_fk(self, q: Array) -> list[list[tuple[float, float, float, float]]]:
+        """Planar serial chains (:meth:`_planar_axes`) in float arithmetic: per finger, per joint
+        ``j`` and one more for the tip, ``(x, y, cos, sin)`` of the joint's position and of the
+        world angle ``theta_j = theta_base + sum_{i <= j} a_i q_i`` of link ``j`` (the tip entry
+        repeats the last link's angle); remembered for the last ``q`` (by its bytes)."""
+        key = np.asarray(q, dtype=float).tobytes()
+        last = self._fk_last
+        if last is not None and last[0] == key:
+            return last[1]
+        ql = np.asarray(q, dtype=float).tolist()
+        out = []
+        for f, (theta, px, py, links, axes) in enumerate(self._planar_chains):
+            off = int(self.hand.offsets[f])
+            joints = []
+            c = sn = 0.0
+            for j, (vx, vy) in enumerate(links):
+                theta += axes[j] * ql[off + j]
+                c, sn = math.cos(theta), math.sin(theta)
+                joints.append((px, py, c, sn))
+                px, py = px + c * vx - sn * vy, py + sn * vx + c * vy
+            joints.append((px, py, c, sn))
+            out.append(joints)
+        self._fk_last = (key, out)
+        return out
+
+    def _function_planar(self, x: Array) -> Array:
+        """:meth:`function` for planar serial chains (:meth:`_planar_axes`) without sliding
+        contacts, in float arithmetic (:meth:`_planar_fk`; the object at ``p_o + s_xy`` turned by
+        ``theta_0 + s_theta``)."""
+        M = self.M
+        q, s = x[:M], x[M:]
+        fk = self._planar_fk(q)
+        sx, sy, st = (float(v) for v in s[:3])
+        ox, oy = float(self.start.position[0]) + sx, float(self.start.position[1]) + sy
+        th = math.atan2(float(self.start.rotation[1, 0]), float(self.start.rotation[0, 0])) + st
+        oc, os_ = math.cos(th), math.sin(th)
+        out = np.empty(self.rows)
+        for k, (ref, pb, po) in enumerate(self.items):
+            if ref is None:
+                bx, by = float(pb[0]), float(pb[1])
+            else:
+                assert ref.finger is not None
+                px, py, c, sn = fk[ref.finger][ref.link]
+                bx = px + c * float(pb[0]) - sn * float(pb[1])
+                by = py + sn * float(pb[0]) + c * float(pb[1])
+            out[2 * k] = bx - (ox + oc * float(po[0]) - os_ * float(po[1]))
+            out[2 * k + 1] = by - (oy + os_ * float(po[0]) + oc * float(po[1]))
+        for k, roll in enumerate(self.rolls):
+            ref = roll[1]
+            assert ref.finger is not None
+            a, b = fk[ref.finger][ref.link], fk[ref.finger][ref.link + 1]
+            out[self._roll0 + 2 * k: self._roll0 + 2 * k + 2] = self._roll_at(k, a, b, (ox, oy), st)
+        out[self._base:] = self.complement.T @ s  # on the line of the analysed direction
+        return out
+
     def function(self, x: Array) -> Array:
         """``F(x)`` ``(rows,)``: sticking rows ``x_b,i(q) - x_o,i(s)``, then the sliding gaps."""
+        if self._z_axes is not None and not self.sliding:
+            return self._function_planar(x)
         q, s = x[: self.M], x[self.M:]
-        pose = self.pose(s)
+        pose = self._pose_at(s)
         d = self.dim
         out = np.empty(self.rows)
         for k, (ref, pb, po) in enumerate(self.items):
@@ -485,10 +587,86 @@ class ContactManifold:
         out[self._base:] = self.complement.T @ s  # on the line of the analysed direction
         return out
 
+    @staticmethod
+    def _planar_axes(hand: HandKinematics) -> list[Array] | None:
+        """The z-components ``(n,)`` of each finger's joint axes when every finger is a
+        :class:`~analysis.kinematics.SerialChain` whose joints all turn about z, exactly (axes
+        ``(0, 0, +-1)``, a base rotation about z): its world axes are then ``(0, 0, a_j)`` at every
+        configuration and its joints and links stay in the plane ``z = 0``; else None."""
+        out = []
+        for f in hand.fingers:
+            if not isinstance(f, SerialChain):
+                return None
+            R = f.base_R
+            if (np.any(f.axes[:, :2] != 0.0) or not np.all(np.abs(f.axes[:, 2]) == 1.0)
+                    or R[2, 2] != 1.0 or np.any(R[2, :2] != 0.0) or np.any(R[:2, 2] != 0.0)
+                    or f.base_p[2] != 0.0 or np.any(f.origins[:, 2] != 0.0)):
+                return None
+            out.append(np.array(f.axes[:, 2], dtype=float))
+        return out
+
+    def _add_planar_rows(self, J: Array, ref: BodyRef, q: Array,
+                         terms: Sequence[tuple[int, float, float, float, float]]) -> None:
+        """For planar serial chains (:meth:`_planar_axes`): add to ``J`` ``(rows, M + D)`` the
+        combinations ``g . J(x)`` of the Jacobian columns of world points ``x`` fixed on the body
+        ``ref``, each term ``(row, x_x, x_y, g_x, g_y)``. Eq. 1 in the plane: joint ``j`` (axis
+        ``a_j z``, at ``p_j``) moves ``x`` by ``a_j (-(x_y - p_j,y), x_x - p_j,x)`` per radian,
+        the values :meth:`HandKinematics.point_jacobian` gives (its ``x`` and ``y`` rows)."""
+        assert self._z_axes is not None and ref.finger is not None
+        f = ref.finger
+        off = int(self.hand.offsets[f])
+        joints = self._planar_fk(q)[f]
+        axes = self._planar_chains[f][4]
+        for j in range(ref.link + 1):
+            a_j = axes[j]
+            px, py = joints[j][0], joints[j][1]
+            for row, x, y, gx, gy in terms:
+                J[row, off + j] += gx * -(a_j * (y - py)) + gy * (a_j * (x - px))
+
+    def _jacobian_planar(self, x: Array) -> Array:
+        """:meth:`jacobian` for planar serial chains (:meth:`_planar_axes`) in float arithmetic: the
+        Jacobian columns of the contact points and of the rolling links' axis ends in the plane
+        (:meth:`_add_planar_rows`); the sliding rows as :meth:`_sliding_jacobian`."""
+        M = self.M
+        q, s = x[:M], x[M:]
+        pose = self._pose_at(s)
+        R = pose.rotation
+        J = np.zeros((self.rows, M + self.D))  # (rows, M + 3)
+        fk = self._planar_fk(q)
+        for k, (ref, pb, po) in enumerate(self.items):
+            r = 2 * k
+            if ref is not None:
+                assert ref.finger is not None
+                px, py, co, sn = fk[ref.finger][ref.link]
+                bx = px + co * float(pb[0]) - sn * float(pb[1])
+                by = py + sn * float(pb[0]) + co * float(pb[1])
+                self._add_planar_rows(J, ref, q, ((r, bx, by, 1.0, 0.0), (r + 1, bx, by, 0.0, 1.0)))
+            J[r, M] = J[r + 1, M + 1] = -1.0
+            y = R[:2, :2] @ po  # object point relative to p_o, world frame
+            J[r, M + 2] = y[1]
+            J[r + 1, M + 2] = -y[0]
+        c = pose.position
+        for k, roll in enumerate(self.rolls):
+            ref = roll[1]
+            assert ref.finger is not None
+            a, b = fk[ref.finger][ref.link], fk[ref.finger][ref.link + 1]
+            g0, g1 = self._roll_grad_rows(k, a, b, c)  # (7,) each: gap, rolling row
+            r = self._roll0 + 2 * k
+            ax, ay, bx, by = float(a[0]), float(a[1]), float(b[0]), float(b[1])
+            self._add_planar_rows(J, ref, q, ((r, ax, ay, g0[0], g0[1]), (r, bx, by, g0[2], g0[3]),
+                                              (r + 1, ax, ay, g1[0], g1[1]), (r + 1, bx, by, g1[2], g1[3])))
+            J[r, M: M + 3] = g0[4:7]
+            J[r + 1, M: M + 3] = g1[4:7]
+        self._sliding_jacobian(J, q, s, pose)
+        J[self._base:, M:] = self.complement.T
+        return J
+
     def jacobian(self, x: Array) -> Array:
         """``F'(x)`` ``(rows, M + D)``: ``[J_c, -G^T]`` at ``s = 0``."""
+        if self._z_axes is not None:
+            return self._jacobian_planar(x)
         q, s = x[: self.M], x[self.M:]
-        pose = self.pose(s)
+        pose = self._pose_at(s)
         R_d = pose.R_d  # (d, d)
         d = self.dim
         J = np.zeros((self.rows, self.M + self.D))  # (d n, M + D)
@@ -504,6 +682,15 @@ class ContactManifold:
                 J[r, self.M + 3:] = skew(y) @ _left_jacobian_so3(s[3:])
         if self.rolls:
             J[self._roll0: self._slide0] = self._rolling_jacobian(x)
+        self._sliding_jacobian(J, q, s, pose)
+        J[self._base:, self.M:] = self.complement.T
+        return J
+
+
+    def _sliding_jacobian(self, J: Array, q: Array, s: Array, pose: Pose) -> None:
+        """The sliding contacts' rows of :meth:`jacobian`, written into ``J`` ``(rows, M + D)``."""
+        R_d = pose.R_d  # (d, d)
+        d = self.dim
         for k, ref in enumerate(self.sliding):  # d gap = u^T (d p_o - J(y) dq); the centre is p_o
             if k not in self._row_of:
                 continue
@@ -534,8 +721,6 @@ class ContactManifold:
             if ref.finger is not None:
                 J[row, : self.M] = -u @ self.hand.point_jacobian(ref, yb, q)
             J[row, self.M: self.M + d] = u
-        J[self._base:, self.M:] = self.complement.T
-        return J
 
 
 #: singular values of ``F'`` below this fraction of the largest are taken as zero by the Newton

@@ -485,9 +485,11 @@ def plan_object_motion(
 
     def checked(X: Array, planner_states: int) -> ConstrainedObjectMotion | None:
         """The path ``X`` ``(k, n)`` densified and every state of it checked, or None."""
-        X = _densify(man, X, DENSE_STEP, tolerance)
+        known: dict[bytes, float] = {}  # |F| of the states the densification projected, by their bytes
+        X = _densify(man, X, DENSE_STEP, tolerance, known)
         step = float(np.max(np.abs(np.diff(X[:, :M], axis=0)))) if len(X) > 1 else 0.0
-        residual = max(float(np.linalg.norm(man.function(x))) for x in X)
+        residual = max(known[k] if (k := x.tobytes()) in known else float(np.linalg.norm(man.function(x)))
+                       for x in X)
         if step > DENSE_STEP or residual > 100 * tolerance or not all_valid(X):
             return None
         if float(np.max(np.abs(X[-1] - x1))) > 1e-6:
@@ -531,17 +533,20 @@ def direction_cosines(S: Array, direction: Array, floor: float = 1e-12) -> Array
     return np.asarray(np.where(nrm > floor, cos, 1.0))
 
 
-def _densify(man: ContactManifold, X: Array, max_step: float, tolerance: float) -> Array:
+def _densify(man: ContactManifold, X: Array, max_step: float, tolerance: float,
+             known: dict[bytes, float] | None = None) -> Array:
     """Insert states between consecutive states of ``X`` ``(k, M + D)`` so that no joint moves more
     than ``max_step``: points of the ambient segment projected back onto the manifold (Newton steps
     with the pseudo-inverse of ``F'``, as OMPL's projection does). A projected point whose object
     moved off its share of the segment's progress along the direction (a projection that slid
     along the manifold: redundant rows of line contacts) is projected again with that progress
     held, and a pair of states still farther apart than ``max_step`` is split again, up to
-    :data:`DENSIFY_DEPTH` times."""
+    :data:`DENSIFY_DEPTH` times. ``known`` (if given) receives ``|F|`` of each state a projection
+    ended on by meeting the tolerance (``project_manifold``'s residual is then that of the state
+    it returns, exactly), by the state's bytes."""
     out = [X[0]]
     for a, b in itertools.pairwise(X):
-        out.extend(_fill(man, a, b, max_step, tolerance, 0))
+        out.extend(_fill(man, a, b, max_step, tolerance, 0, known))
     return np.array(out)
 
 
@@ -549,19 +554,23 @@ def _densify(man: ContactManifold, X: Array, max_step: float, tolerance: float) 
 DENSIFY_DEPTH = 4
 
 
-def _fill(man: ContactManifold, a: Array, b: Array, max_step: float, tolerance: float, depth: int) -> list[Array]:
+def _fill(man: ContactManifold, a: Array, b: Array, max_step: float, tolerance: float, depth: int,
+          known: dict[bytes, float] | None = None) -> list[Array]:
     """The states after ``a`` up to ``b`` (included) of the densified segment ``a -> b``."""
     M = man.M
     k = int(np.ceil(float(np.max(np.abs(b[:M] - a[:M]))) / max_step * 1.02))
     pts = []
     for t in np.arange(1, k) / max(k, 1):
         y = a + t * (b - a)
-        p = project_manifold(man, y, tolerance)[0]
+        p, res = project_manifold(man, y, tolerance)
         if man.direction is not None:
             target = float(man.direction @ y[M:])
             share = abs(float(man.direction @ (b - a)[M:]))  # the segment's progress
             if abs(float(man.direction @ p[M:]) - target) > PROGRESS_SLACK * share + PROGRESS_FLOOR:
                 p = project_manifold(man, y, tolerance, progress=(man.direction, target))[0]
+                res = np.inf  # with the progress held, the residual returned may be an earlier iterate's
+        if known is not None and res <= tolerance:  # ended by meeting the tolerance: |F(p)| itself
+            known[p.tobytes()] = res
         pts.append(p)
     pts.append(b)
     if depth >= DENSIFY_DEPTH:
@@ -570,7 +579,7 @@ def _fill(man: ContactManifold, a: Array, b: Array, max_step: float, tolerance: 
     prev = a
     for p in pts:
         if float(np.max(np.abs(p[:M] - prev[:M]))) > max_step:
-            out.extend(_fill(man, prev, p, max_step, tolerance, depth + 1))
+            out.extend(_fill(man, prev, p, max_step, tolerance, depth + 1, known))
         else:
             out.append(p)
         prev = p

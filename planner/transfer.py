@@ -114,7 +114,7 @@ def plan_transfer(
 
     bounded = bool(np.isfinite(j_lo).any() or np.isfinite(j_hi).any())
 
-    def valid_many(rows: Array) -> Array:  # (N, m) -> (N,) bool: valid_q of each row
+    def evaluate_many(rows: Array) -> Array:  # (N, m) -> (N,) bool: valid_q of each row
         if not bounded:  # a scene chain without limits: every row is inside (a NaN row fails the clearance, NaN >= 0)
             return np.asarray(model.clear_many(finger, q_full, rows, pos, rot, allow))
         inside = np.all((rows >= lo_tol) & (rows <= hi_tol), axis=1)
@@ -122,6 +122,21 @@ def plan_transfer(
         if inside.any():
             out[inside] = model.clear_many(finger, q_full, rows[inside], pos, rot, allow)
         return out
+
+    # the answers of valid_many by row (its bytes): within one transfer everything else the check
+    # reads is fixed, and a row's answer does not depend on the rows checked with it (clear_many
+    # culls and ends each configuration on its own), so a motion the path simplifier or
+    # RRTConnect checks again (about half the rows of the planar plan's transfers) is not
+    # evaluated again; the checks are still counted on the budget by the motion validator
+    known: dict[bytes, bool] = {}
+
+    def valid_many(rows: Array) -> Array:  # (N, m) -> (N,) bool
+        keys = [r.tobytes() for r in rows]
+        new = [i for i, k in enumerate(keys) if k not in known]
+        if new:
+            for i, ok in zip(new, evaluate_many(rows[new]), strict=True):
+                known[keys[i]] = bool(ok)
+        return np.array([known[k] for k in keys], dtype=bool)
 
     if not valid_q(start):
         return None

@@ -116,6 +116,25 @@ def test_point_jacobian_equals_finite_differences_on_random_chains(dim: int, see
         assert np.all(J[:, others] == 0.0)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_point_jacobians_equal_one_point_at_a_time(dim: int) -> None:
+    """``point_jacobians`` of several points on a body is ``point_jacobian`` of each, exactly (the
+    same products element by element), on random hands; zero for a fixed body."""
+    rng = np.random.default_rng(77 + dim)
+    for _ in range(10):
+        hand = random_hand(rng, dim)
+        q = rng.uniform(-np.pi, np.pi, hand.M)
+        for ref in finger_bodies(hand):
+            X = rng.uniform(-1, 1, (3, dim))
+            many = hand.point_jacobians(ref, X, q)
+            assert many.shape == (3, dim, hand.M)
+            for x, J in zip(X, many, strict=True):
+                assert np.array_equal(J, hand.point_jacobian(ref, x, q))
+    palm = hand.resolve_body("palm")
+    assert palm is not None
+    assert not hand.point_jacobians(palm, np.zeros((2, dim)), q).any()
+
+
 @pytest.mark.parametrize("seed", range(10))
 def test_body_frames_match_an_independent_forward_kinematics(seed: int) -> None:
     """``T_k = T_base prod_j Trans(origin_j) Rot(axis_j, q_j)`` composed with scipy's rotations."""

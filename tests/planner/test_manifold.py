@@ -51,3 +51,35 @@ def test_spatial_manifold_jacobian_matches_finite_differences() -> None:
                               for e in 1e-7 * np.eye(len(x))])
         np.testing.assert_allclose(man.jacobian(x), Jn, atol=1e-6)
 
+
+
+def test_planar_function_and_jacobian_equal_the_generic_ones() -> None:
+    """For planar serial chains F' is assembled in float arithmetic from the joints' positions
+    (``_jacobian_planar``) and, without sliding contacts, F too (``_function_planar``, its own
+    forward kinematics); they equal the generic evaluation (``HandKinematics``' forward kinematics
+    and point Jacobians) to round-off, with glued and rolling contacts, a disk sliding on the
+    palm, with and without the direction rows, at random points; a spatial hand has no planar path."""
+    scene = load_scene(EXAMPLES / "planar_disk_envelope.json")
+    hand = HandKinematics.from_scene(scene)
+    st = state_from_scene(scene, hand)
+    palm = [i for i, c in enumerate(st.contacts) if c.body == "palm"]
+    fingers = [i for i in range(st.L) if i not in palm]
+    rng = np.random.default_rng(8)
+    cases = [dict(sticking=list(range(st.L))), dict(sticking=fingers, rolling=True),
+             dict(sticking=fingers, sliding=palm, rolling=True, direction=np.array([0.0, 1.0, 0.0])),
+             dict(sticking=fingers[:2], sliding=palm, direction=np.array([0.3, 1.0, -0.2]))]
+    for case in cases:
+        man = ContactManifold(hand, st, scene=scene, **case)  # type: ignore[arg-type]
+        assert man._z_axes is not None
+        x0 = np.concatenate([st.q, np.zeros(man.D)])
+        for _ in range(5):
+            x = x0 + 0.05 * rng.standard_normal(len(x0))
+            J, F = man.jacobian(x), man.function(x)
+            z, man._z_axes = man._z_axes, None
+            J_generic, F_generic = man.jacobian(x), man.function(x)
+            man._z_axes = z
+            np.testing.assert_allclose(J, J_generic, rtol=0, atol=1e-14)
+            np.testing.assert_allclose(F, F_generic, rtol=0, atol=1e-15)
+    spatial = load_scene(EXAMPLES / "sphere_four_finger_palm.json")
+    sh = HandKinematics.from_scene(spatial)
+    assert ContactManifold(sh, state_from_scene(spatial, sh), [0])._z_axes is None
