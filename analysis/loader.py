@@ -58,12 +58,14 @@ BODY_NORMAL_CONE_TOL = float(np.sin(np.radians(3.0)))
 
 __all__ = [
     "BODY_NORMAL_CONE_TOL",
+    "FILE_ERROR",
     "GEOMETRY_TOL",
     "MAX_SCENE_BYTES",
     "MAX_SCENE_DEPTH",
     "MAX_YAML_ALIASES",
     "MAX_YAML_NODES",
     "NORMAL_CONE_TOL",
+    "YAML_LOADERS",
     "check_geometry",
     "geometry_errors",
     "load_scene",
@@ -229,6 +231,10 @@ MAX_YAML_ALIASES = 32
 #: Most nodes of a YAML document once its aliases are counted as copies.
 MAX_YAML_NODES = 200_000
 
+#: ``SceneError.errors`` type of a file that cannot be read as a scene file (size, encoding,
+#: syntax, nesting, YAML aliases, a value JSON does not have), as opposed to a bad scene field
+FILE_ERROR = "scene_file"
+
 #: Readable names of the YAML values that have no JSON counterpart.
 _NON_JSON = {"date": "a YAML date", "datetime": "a YAML timestamp", "bytes": "YAML !!binary data",
              "set": "a YAML !!set", "tuple": "a YAML pair (!!omap or !!pairs)"}
@@ -385,8 +391,16 @@ def parse_scene_data(source: str | bytes, suffix: str = ".json", *, max_bytes: i
     than ``max_bytes``, bytes that are not UTF-8, a syntax error (with line and column),
     nesting deeper than ``MAX_SCENE_DEPTH``, more than ``MAX_YAML_ALIASES`` aliases or an
     expansion over ``MAX_YAML_NODES``, a value JSON does not have (a YAML date, ``!!binary``,
-    ``!!set``; ``loc`` names it). Bounded in time and memory by the size of ``source``. YAML is
-    read by libyaml where PyYAML has it (``yaml_loader`` picks one of :data:`YAML_LOADERS`)."""
+    ``!!set``; ``loc`` names it; the error's item ``type`` is :data:`FILE_ERROR`). Bounded in
+    time and memory by the size of ``source``. YAML is read by libyaml where PyYAML has it
+    (``yaml_loader`` picks one of :data:`YAML_LOADERS`)."""
+    try:
+        return _parse(source, suffix, max_bytes, yaml_loader)
+    except SceneError as e:
+        raise SceneError(e.loc, e.reason, [{"loc": list(e.loc), "msg": e.reason, "type": FILE_ERROR}]) from None
+
+
+def _parse(source: str | bytes, suffix: str, max_bytes: int, yaml_loader: type | None) -> Any:
     kind = "YAML" if suffix.lower() in (".yaml", ".yml") else "JSON"
     size = len(source) if isinstance(source, bytes) else len(source.encode("utf-8", "surrogatepass"))
     if size > max_bytes:

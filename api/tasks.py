@@ -226,12 +226,8 @@ def run_upload(payload: dict[str, Any], progress: Progress | None = None) -> dic
     from analysis.loader import check_geometry, parse_scene_data, wants_detection, with_detected_contacts
     from analysis.scene import Scene
     from api.schemas import _check_files
-    from api.workers import FILE_ERROR
 
-    try:
-        data = parse_scene_data(payload["raw"], payload["suffix"], max_bytes=payload["max_bytes"])
-    except SceneError as e:
-        raise SceneError(e.loc, e.reason, [{"loc": list(e.loc), "msg": e.reason, "type": FILE_ERROR}]) from None
+    data = parse_scene_data(payload["raw"], payload["suffix"], max_bytes=payload["max_bytes"])  # FILE_ERROR items
     try:
         _check_files(data)
     except ValueError as e:  # "<field>: <reason>", a URDF or mesh outside the allowed places

@@ -44,11 +44,6 @@ class TaskError(Exception):
         self.errors = errors
 
 
-#: The ``type`` of a scene task error's first item when the file itself cannot be read as a scene
-#: file (size, encoding, syntax, nesting, YAML aliases, a value JSON does not have)
-FILE_ERROR = "scene_file"
-
-
 class TaskTimeout(Exception):
     def __init__(self, limit: float):
         super().__init__(f"stopped after the time limit of {limit:g} s")

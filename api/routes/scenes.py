@@ -8,14 +8,14 @@ from fastapi import APIRouter, File, Response, UploadFile
 from pydantic import SkipValidation
 
 from analysis.exceptions import SceneError
-from analysis.loader import read_scene_data
+from analysis.loader import FILE_ERROR, read_scene_data
 from analysis.scene import Scene
 from api.bodies import validated
 from api.deps import AnalysisPoolDep, LightPoolDep, SettingsDep, _hand_size_error, check_hand_size, check_raw_hand_size
 from api.errors import ApiError
 from api.lanes import geometry_lane, run_in_lane, upload_lane
 from api.schemas import ContactsCreate, ContactsPublic, ErrorBody, ExampleScene, GeometryCreate
-from api.workers import FILE_ERROR, TaskError, TaskTimeout
+from api.workers import TaskError, TaskTimeout
 
 router = APIRouter(prefix="/scenes", tags=["scenes"])
 
