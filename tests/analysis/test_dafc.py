@@ -563,3 +563,94 @@ def test_slip_sector_bounds_reused_from_certified_optima_match_scipy() -> None:
             bound, _ = _relaxed_box_lp(oracle, dr, oracle.st.G_c, dep, box, store)
             assert bound == pytest.approx(ref_bound, abs=1e-7 * sc.force * max(1.0, abs(ref_bound) / sc.force))
     assert certified > 5 and oracle.box_vertex_hits > 5
+
+
+def _cone_motions(oracle: DAFCOracle, box: tuple, draws: int, rng: np.random.Generator) -> np.ndarray:
+    """Motions ``dzeta_c`` of a sector box's cone (``B dzeta_c <= 0``, every S-point's slip in its
+    sector), found without cdd: maximisers of seeded random objectives over the cone cut by the
+    cube ``|dzeta_c|_inf <= 1`` (scipy), and random convex combinations of them. ``(n, a)``."""
+    from scipy.optimize import linprog
+
+    from analysis.dafc import _sector_rows
+
+    sy, ms = oracle.system, oracle.ms
+    d = sy.d
+    rows = [oracle.B] if oracle.B.shape[0] else []
+    for k, sec in enumerate(box):
+        R, _ = _sector_rows(sec, d, 0.0)
+        if R.shape[0]:
+            rows.append(-(R @ sy.tangents[oracle.sel.s_index[k]] @ oracle.Ps[k * d:(k + 1) * d]))
+    A = np.vstack(rows) if rows else np.zeros((0, ms.a))
+    pts = []
+    for _ in range(draws):
+        res = linprog(-rng.standard_normal(ms.a), A_ub=A if A.size else None, b_ub=np.zeros(len(A)) if A.size else None,
+                      bounds=[(-1.0, 1.0)] * ms.a, method="highs")
+        assert res.status == 0
+        pts.append(res.x)
+    P = np.array(pts)
+    mix = rng.dirichlet(np.ones(len(P)) * 0.3, size=draws) @ P
+    return np.vstack([P, mix])
+
+
+@pytest.mark.parametrize("combination", ["FFDDDDDDS", "DDDSFFFSS", "SFDSSSFFS", "DSFFDSDDS"])
+def test_tightened_sectors_hold_every_sliding_motion_of_the_box(combination: str) -> None:
+    """Issue 9 (speed): the slip-sector search narrows a box's sectors to the slips its cone really
+    has, and drops a box in which some S-point cannot slide (``_tighten``). On the root box, its
+    quarter turns and seeded nested boxes of four wrap combinations: every motion of the box's cone
+    (found by scipy LPs, without cdd) whose S-points slide has each slip inside the narrowed
+    sector; where the box is dropped, no motion of its cone makes some S-point slide (the largest
+    slip component over the cone cut by the unit cube, scipy, is at rounding level)."""
+    from scipy.optimize import linprog
+
+    from analysis.dafc import SLIP_TOL, _box_cone, _sector_rows, _slip_maps, _split, _tighten
+
+    system = example_system("sphere_four_finger_wrap")
+    oracle = _oracle(system, combination)
+    sy, ms = oracle.system, oracle.ms
+    d, nS = sy.d, len(oracle.sel.s_index)
+    P, S = _slip_maps(oracle)
+    rng = np.random.default_rng(11)
+    boxes: list[tuple] = [tuple(None for _ in range(nS))]
+    for _ in range(10):  # nested boxes: split a random point of a random box, a few times
+        box = boxes[int(rng.integers(len(boxes)))]
+        k = int(rng.integers(nS))
+        boxes.append((*box[:k], _split(box[k], d)[int(rng.integers(2))], *box[k + 1:]))
+    boxes += [tuple(_split(None, d)[q] if k == 0 else None for k in range(nS)) for q in range(4)]
+    dropped = narrowed = 0
+    for box in boxes:
+        Z = _box_cone(oracle, box)
+        tight = _tighten(P, S, box, Z)
+        if tight is None:
+            dropped += 1
+            rows = [oracle.B] if oracle.B.shape[0] else []
+            for k, sec in enumerate(box):
+                R, _ = _sector_rows(sec, d, 0.0)
+                if R.shape[0]:
+                    rows.append(-(R @ S[k]))
+            A = np.vstack(rows)
+            stuck = []
+            for k in range(nS):  # the largest |slip component| of point k over the cone in the cube
+                top = 0.0
+                for j in range(d):
+                    for sign in (1.0, -1.0):
+                        res = linprog(-sign * P[k][j], A_ub=A, b_ub=np.zeros(len(A)), bounds=[(-1.0, 1.0)] * ms.a,
+                                      method="highs")
+                        assert res.status == 0
+                        top = max(top, -res.fun)
+                stuck.append(top <= SLIP_TOL)
+            assert any(stuck), (combination, box)
+            continue
+        narrowed += sum(t != b for t, b in zip(tight, box, strict=True))
+        for zc in _cone_motions(oracle, box, 12, rng):
+            n = float(np.linalg.norm(zc))
+            for k, sec in enumerate(tight):
+                sig = S[k] @ zc  # (2,) tangent slip
+                if sec is None or np.linalg.norm(P[k] @ zc) <= SLIP_TOL * n:
+                    continue
+                a, b = sec
+                theta = np.arctan2(sig[1], sig[0])
+                phi = np.mod(theta - 0.5 * (a + b) + np.pi, 2 * np.pi) - np.pi  # from the bisector
+                assert abs(phi) <= 0.5 * (b - a) + 1e-9, (combination, box, k, theta, sec)
+    assert narrowed > 0
+    if combination == "FFDDDDDDS":  # the palm's slip is one line of the object motions: boxes off it go
+        assert dropped > 0
