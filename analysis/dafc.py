@@ -1528,7 +1528,8 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16, realisable: bool 
     choice, so "the first member" alone may be a direction with no W_3-admissible forces on one
     machine and a realisable one on another. ``realisable=False`` (the enumeration's table, whose
     verdict and dimension do not depend on it) returns the first member of each stage, without
-    the torque-set LPs.
+    the torque-set LPs, and runs (2b) before (2): the same verdict, dimension and exactness, with
+    (2) only where the slip-sector search leaves boxes open.
     """
     ms = oracle.ms
     if ms.a_bar == 0:
@@ -1561,11 +1562,25 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16, realisable: bool 
     positive = [u for u in generators if oracle.relaxed_positive(ms.Lambda_r_t @ u)]
     if not positive:
         return None, 0, True
+    best: DirectionTest | None = None
+    searched = False
+    if not realisable:
+        # the table: the slip-sector search (2b) first, which decides most combinations at once;
+        # the full redundancy search (2) only where it leaves boxes open. The verdict is the same
+        # either way (a member of (2) is a member, which (2b) never calls empty; (2b) runs after an
+        # empty (2) in the other order), and so are the dimension and exactness (below)
+        found = slip_sector_search(oracle)
+        oracle.sector_boxes += found.boxes
+        if found.test is not None:
+            return found.test, cone_dim, False
+        if found.decided:
+            return None, 0, True
+        oracle.sector_open += found.open_boxes
+        searched = True
     # (2) the interior samples again with the full redundancy search, then the generators
     t = _prefer_realisable(oracle, interior, screen=False, witness=False, prefer=realisable)
     if t is not None:
         return t, cone_dim, False
-    best: DirectionTest | None = None
     best_ok = False
     for u in positive:  # the first member whose torque set is non-empty, else the first member
         t = oracle.test(ms.Lambda_r_t @ u, screen=False, witness=False)
@@ -1576,16 +1591,17 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16, realisable: bool 
             if best_ok:
                 break
     if best is None:
-        # (2b) the branch and bound over the S-points' slip directions on the whole allowable
-        # cone (:func:`slip_sector_search`): a member, or a proof of emptiness when it closes
-        # every box
-        found = slip_sector_search(oracle)
-        oracle.sector_boxes += found.boxes
-        if found.test is not None:
-            return found.test, cone_dim, False
-        if found.decided:
-            return None, 0, True
-        oracle.sector_open += found.open_boxes
+        if not searched:
+            # (2b) the branch and bound over the S-points' slip directions on the whole allowable
+            # cone (:func:`slip_sector_search`): a member, or a proof of emptiness when it closes
+            # every box
+            found = slip_sector_search(oracle)
+            oracle.sector_boxes += found.boxes
+            if found.test is not None:
+                return found.test, cone_dim, False
+            if found.decided:
+                return None, 0, True
+            oracle.sector_open += found.open_boxes
         # (2c) the search left boxes open: seeded redundancies at three scales around the least-L1
         # one, on the generators with positive relaxed work and the centroid (sampling, not a proof)
         t = _redundancy_draws(oracle, positive + ([centroid / np.linalg.norm(centroid)]
