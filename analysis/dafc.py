@@ -1294,6 +1294,17 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
             z = _box_motion(oracle, u_j, list(range(nS)), box, targets[j], store)
             if z is not None:
                 cands.append(np.r_[u_j, z])
+            elif a_bar > 1:
+                # no motion of that direction slides in the box (an S-point's slip vanishes there,
+                # as a fixed-body point's on the line of object motions it does not move along):
+                # the same friction targets a step inside the cone, where the points slide. The
+                # wrap's FFDSDDDDS family has members that only this candidate finds
+                u_in = U[j] + 0.01 * centre[:a_bar] / max(1e-12, float(np.linalg.norm(centre)))
+                if float(np.linalg.norm(u_in)) > 1e-9:
+                    u_in = u_in / np.linalg.norm(u_in)
+                    z = _box_motion(oracle, u_in, list(range(nS)), box, targets[j], store)
+                    if z is not None:
+                        cands.append(np.r_[u_in, z])
             # and the same at the centroid's object direction
             u_c = centre[:a_bar]
             if a_bar > 1 and float(np.linalg.norm(u_c)) > 1e-9:

@@ -654,3 +654,27 @@ def test_tightened_sectors_hold_every_sliding_motion_of_the_box(combination: str
     assert narrowed > 0
     if combination == "FFDDDDDDS":  # the palm's slip is one line of the object motions: boxes off it go
         assert dropped > 0
+
+
+def test_slip_sector_search_finds_members_next_to_a_generator_that_does_not_slide() -> None:
+    """Issue 9: in the wrap's FFDSDDDDS (a~ = 2) the palm's slip is one line of the object motions,
+    so the generator of a box's cone with the largest bound has a palm that does not slide; a motion
+    a step inside the cone with the relaxed maximiser's friction targets is a member (the search
+    left this combination "not proven" before). The member is certified in newtons, and the
+    independent scipy LP (tests/helpers/independent_dafc.py) agrees it is one."""
+    import json
+
+    from closure_helpers import EXAMPLES
+    from independent_dafc import check_member
+
+    system = example_system("sphere_four_finger_wrap")
+    parts = CombinationParts.build(system, "FFDSDDDDS")
+    oracle = parts.oracle()
+    found = slip_sector_search(oracle)
+    assert found.test is not None and found.test.member and oracle.certify(found.test)
+    assert found.test.zeta_c is not None
+    motion = parts.ms.Phi_full @ found.test.zeta_c  # (M + D,)
+    data = json.loads((EXAMPLES / "sphere_four_finger_wrap.json").read_text())
+    chk = check_member(data, "FFDSDDDDS", motion[:system.M], motion[system.M:])
+    assert chk.member, (chk.motion_errors, chk.work, chk.work_min)
+    assert chk.work == pytest.approx(found.test.work, rel=1e-6, abs=1e-9)
