@@ -1539,8 +1539,9 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16, realisable: bool 
     choice, so "the first member" alone may be a direction with no W_3-admissible forces on one
     machine and a realisable one on another. ``realisable=False`` (the enumeration's table, whose
     verdict and dimension do not depend on it) returns the first member of each stage, without
-    the torque-set LPs, and runs (2b) before (2): the same verdict, dimension and exactness, with
-    (2) only where the slip-sector search leaves boxes open.
+    the torque-set LPs, skips (0) and runs (2b) before (2): the same verdict, dimension and
+    exactness, with (2) (whose candidates include those of (0)) only where the slip-sector search
+    leaves boxes open.
     """
     ms = oracle.ms
     if ms.a_bar == 0:
@@ -1566,9 +1567,10 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16, realisable: bool 
         v = rng.random(len(dirs)) @ dirs
         if np.linalg.norm(v) > 1e-9:
             interior.append(v / np.linalg.norm(v))
-    t = _prefer_realisable(oracle, interior, screen=False, quick=True, witness=False, prefer=realisable)
-    if t is not None:
-        return t, cone_dim, False
+    if realisable:  # the table goes from (1) to the slip-sector search (2b) below
+        t = _prefer_realisable(oracle, interior, screen=False, quick=True, witness=False, prefer=realisable)
+        if t is not None:
+            return t, cone_dim, False
     # (1) relaxation: exact emptiness certificate
     positive = [u for u in generators if oracle.relaxed_positive(ms.Lambda_r_t @ u)]
     if not positive:
@@ -1577,9 +1579,10 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16, realisable: bool 
     searched = False
     if not realisable:
         # the table: the slip-sector search (2b) first, which decides most combinations at once;
-        # the full redundancy search (2) only where it leaves boxes open. The verdict is the same
-        # either way (a member of (2) is a member, which (2b) never calls empty; (2b) runs after an
-        # empty (2) in the other order), and so are the dimension and exactness (below)
+        # the samples (0) and the full redundancy search (2) only where it leaves boxes open. The
+        # verdict is the same either way (a member of (0) or (2) is a member, which (2b) never
+        # calls empty; (2b) runs after an empty (2) in the other order), and so are the dimension
+        # and exactness
         found = slip_sector_search(oracle)
         oracle.sector_boxes += found.boxes
         if found.test is not None:
