@@ -799,9 +799,12 @@ SECTOR_ZMAX = 1e2
 #: Sides of the polygon circumscribing a free S-point's friction disc (3-D).
 SECTOR_FREE_SIDES = 8
 #: :func:`_tighten`: a generator's slip (tangent coordinates, unit generator) at or below this is
-#: zero when a sector is narrowed to the slips of its box's cone, and the angle (radians) by which
-#: a narrowed sector is widened on each side (far above the rounding of the generators' angles).
-SECTOR_ZERO_SLIP = 1e-10
+#: zero when a sector is narrowed to the slips of its box's cone (rounding: a slip that vanishes
+#: in exact arithmetic comes out near 1e-16), and the angle (radians) by which a narrowed sector is
+#: widened on each side (far above the rounding of the generators' angles). With 1e-10 instead
+#: the wrap's table is the same; with exactly 0 its searches leave no box open either, at twice
+#: the LPs.
+SECTOR_ZERO_SLIP = 1e-14
 SECTOR_WIDEN = 1e-6
 
 Sector = tuple[float, float] | None  # an interval of slip angles in the tangent basis; None = any
@@ -1170,6 +1173,11 @@ def _tighten(P: Array, S: Array, box: tuple[Sector, ...], Z: Array) -> tuple[Sec
       of every motion of ``K`` is still inside the box's relaxed force set (:func:`_relaxed_box_lp`),
       whose band is now tighter: exact where the slips lie on one ray (an S-point on a fixed body
       when the object direction is fixed, ``a~ = 1``), and such a sector is never split again.
+      The generators counted as zero contribute at most :data:`SECTOR_ZERO_SLIP` per unit weight,
+      so a motion whose slip leaves the widened arc slides by less than
+      ``SECTOR_ZERO_SLIP / sin(SECTOR_WIDEN)`` (1e-8) times its total weight on those generators:
+      below the member test's :data:`SLIP_TOL` unless that weight exceeds ten times the motion's
+      size (generators cancelling each other); such motions are not searched.
     """
     d = S.shape[1] + 1
     sv = np.linalg.svd(Z, compute_uv=False)  # (min(k, a),)
