@@ -278,9 +278,11 @@ class FamilyKinematics:
         # the whole motion space: dr may move too (a fixed body's D-point is left by the object);
         # a D-point whose normal velocity vanishes on all of it is no row of the cone
         # (MotionSpace.B), decided only where that is clear-cut
-        sel = selection(sy, combination)
-        A_c = sel.H_c @ sy.A  # (L_c, M + D)
-        Lam = null_space(A_c) if sel.L_c else np.eye(sy.M + sy.D)  # (M + D, a)
+        # A_c = H_c A (eq. 4): an F-point's rows of A, an S/N-point's normal row
+        c_rows = [self.A[i] if s == "F" else self.normal_rows[i][None, :]
+                  for i, s in enumerate(combination) if s in "FSN"]
+        # any orthonormal basis: the least-norm push Lam y below and the row sizes do not depend on it
+        Lam = null_space(np.vstack(c_rows), canonical=False) if c_rows else np.eye(sy.M + sy.D)  # (M + D, a)
         order = sorted(stuck)
         R = self.normal_rows[order] @ Lam  # (k, a)
         size_R = np.linalg.norm(R, axis=1)  # (k,)

@@ -38,11 +38,12 @@ def _canonical(B: Array) -> Array:
     return out
 
 
-def null_space(A: Array, tol: float | None = None) -> Array:
+def null_space(A: Array, tol: float | None = None, canonical: bool = True) -> Array:
     """Orthonormal basis ``(n, n - rank)`` of ``{x : A x = 0}`` for ``A`` of shape ``(m, n)``.
 
     Singular values ``<= tol`` count as zero; by default ``tol = RANK_RTOL * max(1, s_max)``,
-    the tolerance of :func:`rank`.
+    the tolerance of :func:`rank`. ``canonical=False``: LAPACK's basis with its signs as they come,
+    for callers whose result does not depend on the basis (projections, least-norm motions).
     """
     A = np.asarray(A, dtype=float)
     n = A.shape[1]
@@ -50,7 +51,7 @@ def null_space(A: Array, tol: float | None = None) -> Array:
         return np.eye(n)
     _, s, Vt = np.linalg.svd(A, full_matrices=True)
     rank = int(np.sum(s > (_tol(s) if tol is None else tol)))
-    return _canonical(Vt[rank:].T)
+    return _canonical(Vt[rank:].T) if canonical else Vt[rank:].T
 
 
 def orth(A: Array) -> Array:

@@ -563,3 +563,164 @@ def test_slip_sector_bounds_reused_from_certified_optima_match_scipy() -> None:
             bound, _ = _relaxed_box_lp(oracle, dr, oracle.st.G_c, dep, box, store)
             assert bound == pytest.approx(ref_bound, abs=1e-7 * sc.force * max(1.0, abs(ref_bound) / sc.force))
     assert certified > 5 and oracle.box_vertex_hits > 5
+
+
+def _cone_motions(oracle: DAFCOracle, box: tuple, draws: int, rng: np.random.Generator) -> np.ndarray:
+    """Motions ``dzeta_c`` of a sector box's cone (``B dzeta_c <= 0``, every S-point's slip in its
+    sector), found without cdd: maximisers of seeded random objectives over the cone cut by the
+    cube ``|dzeta_c|_inf <= 1`` (scipy), and random convex combinations of them. ``(n, a)``."""
+    from scipy.optimize import linprog
+
+    from analysis.dafc import _sector_rows
+
+    sy, ms = oracle.system, oracle.ms
+    d = sy.d
+    rows = [oracle.B] if oracle.B.shape[0] else []
+    for k, sec in enumerate(box):
+        R, _ = _sector_rows(sec, d, 0.0)
+        if R.shape[0]:
+            rows.append(-(R @ sy.tangents[oracle.sel.s_index[k]] @ oracle.Ps[k * d:(k + 1) * d]))
+    A = np.vstack(rows) if rows else np.zeros((0, ms.a))
+    pts = []
+    for _ in range(draws):
+        res = linprog(-rng.standard_normal(ms.a), A_ub=A if A.size else None, b_ub=np.zeros(len(A)) if A.size else None,
+                      bounds=[(-1.0, 1.0)] * ms.a, method="highs")
+        assert res.status == 0
+        pts.append(res.x)
+    P = np.array(pts)
+    mix = rng.dirichlet(np.ones(len(P)) * 0.3, size=draws) @ P
+    return np.vstack([P, mix])
+
+
+@pytest.mark.parametrize("combination", ["FFDDDDDDS", "DDDSFFFSS", "SFDSSSFFS", "DSFFDSDDS"])
+def test_tightened_sectors_hold_every_sliding_motion_of_the_box(combination: str) -> None:
+    """Issue 9 (speed): the slip-sector search narrows a box's sectors to the slips its cone really
+    has, and drops a box in which some S-point cannot slide (``_tighten``). On the root box, its
+    quarter turns and seeded nested boxes of four wrap combinations: every motion of the box's cone
+    (found by scipy LPs, without cdd) whose S-points slide has each slip inside the narrowed
+    sector; where the box is dropped, no motion of its cone makes some S-point slide (the largest
+    slip component over the cone cut by the unit cube, scipy, is at rounding level)."""
+    from scipy.optimize import linprog
+
+    from analysis.dafc import SLIP_TOL, _box_cone, _sector_rows, _slip_maps, _split, _tighten
+
+    system = example_system("sphere_four_finger_wrap")
+    oracle = _oracle(system, combination)
+    sy, ms = oracle.system, oracle.ms
+    d, nS = sy.d, len(oracle.sel.s_index)
+    P, S = _slip_maps(oracle)
+    rng = np.random.default_rng(11)
+    boxes: list[tuple] = [tuple(None for _ in range(nS))]
+    for _ in range(10):  # nested boxes: split a random point of a random box, a few times
+        box = boxes[int(rng.integers(len(boxes)))]
+        k = int(rng.integers(nS))
+        boxes.append((*box[:k], _split(box[k], d)[int(rng.integers(2))], *box[k + 1:]))
+    boxes += [tuple(_split(None, d)[q] if k == 0 else None for k in range(nS)) for q in range(4)]
+    dropped = narrowed = 0
+    for box in boxes:
+        Z = _box_cone(oracle, box)
+        tight = _tighten(P, S, box, Z)
+        if tight is None:
+            dropped += 1
+            rows = [oracle.B] if oracle.B.shape[0] else []
+            for k, sec in enumerate(box):
+                R, _ = _sector_rows(sec, d, 0.0)
+                if R.shape[0]:
+                    rows.append(-(R @ S[k]))
+            A = np.vstack(rows)
+            stuck = []
+            for k in range(nS):  # the largest |slip component| of point k over the cone in the cube
+                top = 0.0
+                for j in range(d):
+                    for sign in (1.0, -1.0):
+                        res = linprog(-sign * P[k][j], A_ub=A, b_ub=np.zeros(len(A)), bounds=[(-1.0, 1.0)] * ms.a,
+                                      method="highs")
+                        assert res.status == 0
+                        top = max(top, -res.fun)
+                stuck.append(top <= SLIP_TOL)
+            assert any(stuck), (combination, box)
+            continue
+        narrowed += sum(t != b for t, b in zip(tight, box, strict=True))
+        for zc in _cone_motions(oracle, box, 12, rng):
+            n = float(np.linalg.norm(zc))
+            for k, sec in enumerate(tight):
+                sig = S[k] @ zc  # (2,) tangent slip
+                if sec is None or np.linalg.norm(P[k] @ zc) <= SLIP_TOL * n:
+                    continue
+                a, b = sec
+                theta = np.arctan2(sig[1], sig[0])
+                phi = np.mod(theta - 0.5 * (a + b) + np.pi, 2 * np.pi) - np.pi  # from the bisector
+                assert abs(phi) <= 0.5 * (b - a) + 1e-9, (combination, box, k, theta, sec)
+    assert narrowed > 0
+    if combination == "FFDDDDDDS":  # the palm's slip is one line of the object motions: boxes off it go
+        assert dropped > 0
+
+
+def test_slip_sector_search_finds_members_next_to_a_generator_that_does_not_slide() -> None:
+    """Issue 9: in the wrap's FFDSDDDDS (a~ = 2) the palm's slip is one line of the object motions,
+    so the generator of a box's cone with the largest bound has a palm that does not slide; a motion
+    a step inside the cone with the relaxed maximiser's friction targets is a member (the search
+    left this combination "not proven" before). The member is certified in newtons, and the
+    independent scipy LP (tests/helpers/independent_dafc.py) agrees it is one."""
+    import json
+
+    from closure_helpers import EXAMPLES
+    from independent_dafc import check_member
+
+    system = example_system("sphere_four_finger_wrap")
+    parts = CombinationParts.build(system, "FFDSDDDDS")
+    oracle = parts.oracle()
+    found = slip_sector_search(oracle)
+    assert found.test is not None and found.test.member and oracle.certify(found.test)
+    assert found.test.zeta_c is not None
+    motion = parts.ms.Phi_full @ found.test.zeta_c  # (M + D,)
+    data = json.loads((EXAMPLES / "sphere_four_finger_wrap.json").read_text())
+    chk = check_member(data, "FFDSDDDDS", motion[:system.M], motion[system.M:])
+    assert chk.member, (chk.motion_errors, chk.work, chk.work_min)
+    assert chk.work == pytest.approx(found.test.work, rel=1e-6, abs=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("combination", ["DDDSFFFSS", "FFDDDDDDS", "SFFFDSSFS"])
+def test_slip_sector_search_proves_emptiness_an_independent_search_agrees(combination: str) -> None:
+    """Issue 9: wrap combinations the slip-sector search left "not proven" before its sectors were
+    narrowed to their cones' slips (``_tighten``) are now decided empty (no box open); seeded
+    allowable motions of the combination, built from the independent kinematics
+    (tests/helpers/independent_dafc.py, scipy null space, D-points not penetrating), are never a
+    member for the independent scipy LP."""
+    import json
+
+    from closure_helpers import EXAMPLES
+    from independent_dafc import _skew, check_member, contact_jacobians
+    from scipy.linalg import null_space
+
+    system = example_system("sphere_four_finger_wrap")
+    found = slip_sector_search(_oracle(system, combination))
+    assert found.test is None and found.decided
+    data = json.loads((EXAMPLES / "sphere_four_finger_wrap.json").read_text())
+    Js = contact_jacobians(data)
+    M = Js[0].shape[1]
+    p_o = np.asarray(data["object"]["pose"]["position"], float)
+    rows, d_rows = [], []
+    for i, s in enumerate(combination):
+        c = data["contacts"][i]
+        n = np.asarray(c["normal"], float) / np.linalg.norm(c["normal"])
+        A = np.hstack([Js[i], -np.vstack([np.eye(3), _skew(np.asarray(c["point"], float) - p_o)]).T])  # (3, M + 6)
+        if s == "F":
+            rows.extend(A)
+        elif s == "S":
+            rows.append(n @ A)
+        else:
+            d_rows.append(n @ A)
+    N = null_space(np.array(rows))  # (M + 6, k)
+    rng = np.random.default_rng(5)
+    tried = 0
+    for _ in range(600):
+        x = N @ rng.standard_normal(N.shape[1])
+        if np.any(np.array(d_rows) @ x > 0) or np.linalg.norm(x[M:]) < 1e-6 * np.linalg.norm(x):
+            continue
+        x /= np.linalg.norm(x)
+        chk = check_member(data, combination, x[:M], x[M:])
+        assert not chk.member, (combination, chk.work, chk.work_min)
+        tried += 1
+    assert tried > 20

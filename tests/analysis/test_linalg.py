@@ -52,3 +52,18 @@ def test_a_range_with_distinct_singular_values_is_canonical() -> None:
     # A R has the same left singular vectors (R orthogonal): the same basis, signs included
     np.testing.assert_allclose(orth(A @ _random_orthogonal(rng, 7)), U, rtol=0, atol=1e-9)
     np.testing.assert_allclose(orth(-A), U, rtol=0, atol=1e-9)
+
+
+def test_a_non_canonical_null_space_spans_the_same_space() -> None:
+    """``null_space(canonical=False)`` (issue 9, speed): an orthonormal basis of the same null space
+    as the canonical one, on seeded rank-deficient matrices: ``A N = 0``, ``N^T N = I`` and the
+    same projector ``N N^T``."""
+    rng = np.random.default_rng(3)
+    for m, n, r in [(5, 9, 3), (12, 22, 10), (4, 4, 2), (6, 3, 3)]:
+        A = rng.standard_normal((m, r)) @ rng.standard_normal((r, n))  # (m, n) of rank r
+        N = null_space(A, canonical=False)
+        C = null_space(A)
+        assert N.shape == C.shape == (n, n - r)
+        np.testing.assert_allclose(A @ N, 0.0, atol=1e-10)
+        np.testing.assert_allclose(N.T @ N, np.eye(n - r), atol=1e-12)
+        np.testing.assert_allclose(N @ N.T, C @ C.T, atol=1e-12)
