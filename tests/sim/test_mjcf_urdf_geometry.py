@@ -211,6 +211,7 @@ def test_active_closure_plan_replays_with_the_object_still(scene: Scene) -> None
     assert sim.tolerance == 0.05 and sim.ok
     assert "link release" in sim.steps[0].note
     assert "joint servo" in sim.control and sim.hold_servo_share <= 0.01, (sim.control, sim.hold_servo_share)
+    assert "a release's torque goes along its path to the holding torque of the grasp after it" in sim.control
     # the pad box (thumb link 3) touches in MuJoCo at the start and is off the cylinder at the end
     assert sim.start_contacts is not None and "thumb/3" in sim.start_contacts and "thumb/4" in sim.start_contacts
     model = build_model(scene)
