@@ -1522,6 +1522,19 @@ def _redundancy_draws(oracle: DAFCOracle, dirs: list[Array]) -> DirectionTest | 
     return None
 
 
+def _sector_verdict(oracle: DAFCOracle, cone_dim: int) -> tuple[DirectionTest | None, int, bool] | None:
+    """Step (2b) of :func:`dafc_nonempty`: the slip-sector search's answer in its return form (a
+    member, or exact emptiness), or None when it left boxes open (counted on the oracle)."""
+    found = slip_sector_search(oracle)
+    oracle.sector_boxes += found.boxes
+    if found.test is not None:
+        return found.test, cone_dim, False
+    if found.decided:
+        return None, 0, True
+    oracle.sector_open += found.open_boxes
+    return None
+
+
 def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16, realisable: bool = True
                   ) -> tuple[DirectionTest | None, int, bool]:
     """Decide whether DAFC is empty; return (a member or None, dim DAFC, exact).
@@ -1591,13 +1604,9 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16, realisable: bool 
         # verdict is the same either way (a member of (0) or (2) is a member, which (2b) never
         # calls empty; (2b) runs after an empty (2) in the other order), and so are the dimension
         # and exactness
-        found = slip_sector_search(oracle)
-        oracle.sector_boxes += found.boxes
-        if found.test is not None:
-            return found.test, cone_dim, False
-        if found.decided:
-            return None, 0, True
-        oracle.sector_open += found.open_boxes
+        decided = _sector_verdict(oracle, cone_dim)
+        if decided is not None:
+            return decided
         searched = True
     # (2) the interior samples again with the full redundancy search, then the generators
     t = _prefer_realisable(oracle, interior, screen=False, witness=False, prefer=realisable)
@@ -1617,13 +1626,9 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16, realisable: bool 
             # (2b) the branch and bound over the S-points' slip directions on the whole allowable
             # cone (:func:`slip_sector_search`): a member, or a proof of emptiness when it closes
             # every box
-            found = slip_sector_search(oracle)
-            oracle.sector_boxes += found.boxes
-            if found.test is not None:
-                return found.test, cone_dim, False
-            if found.decided:
-                return None, 0, True
-            oracle.sector_open += found.open_boxes
+            decided = _sector_verdict(oracle, cone_dim)
+            if decided is not None:
+                return decided
         # (2c) the search left boxes open: seeded redundancies at three scales around the least-L1
         # one, on the generators with positive relaxed work and the centroid (sampling, not a proof)
         t = _redundancy_draws(oracle, positive + ([centroid / np.linalg.norm(centroid)]
