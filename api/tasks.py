@@ -222,6 +222,8 @@ def run_upload(payload: dict[str, Any], progress: Progress | None = None) -> dic
     costs a worker's time under the request's time limit, never the server's. Returns the
     scene's JSON and its joint count; a scene over ``max_joints`` joints returns ``scene`` None
     before any kinematics (the route answers 413)."""
+    from pydantic import ValidationError
+
     from analysis.exceptions import SceneError
     from analysis.loader import check_geometry, parse_scene_data, wants_detection, with_detected_contacts
     from analysis.scene import Scene
@@ -238,7 +240,7 @@ def run_upload(payload: dict[str, Any], progress: Progress | None = None) -> dic
         data, _ = with_detected_contacts(data)
     try:
         scene = Scene.model_validate(data)
-    except Exception:
+    except ValidationError:
         scene_from_dict(data)  # raises the SceneError naming the first bad field
         raise
     joints = scene.M

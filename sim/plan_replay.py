@@ -789,11 +789,8 @@ def simulate_plan(
                 # the holding torque of the grasp after the step (the next step's tau_st, else the
                 # final grasp's), reached along the path: a link release moves the finger's kept
                 # contacts' Jacobians with it, so tau_st (at the path's start) no longer holds at its end
-                tau_after = tau_st
-                if nxt is not None and nxt.tau_stationary is not None:
-                    tau_after = nxt.tau_stationary
-                elif (final_tau := holding_torque_after(plan, scene, hand, step)) is not None:
-                    tau_after = final_tau
+                after_tau, _ = _hold_after(plan, scene, hand, step, nxt)
+                tau_after = tau_st if after_tau is None else after_tau
 
                 def tau_along(t: float, tau0: Array = tau_st, tau1: Array = tau_after, T: float = T) -> Array:
                     return tau0 + smooth_ramp(t, T) * (tau1 - tau0)  # the path's progress (driven_profile)
@@ -814,14 +811,11 @@ def simulate_plan(
                 after = _mask(hand, all_f - busy_after)
                 run.posture = _hold_posture(run, hand, _finger_points(hand, step.after.contacts, "F" * step.after.L),
                                             st.q_path[-1])  # the new contact held too, at the planned end
-                if nxt is not None and nxt.tau_stationary is not None:
-                    run.ramp_to(nxt.tau_stationary, st.object_path[-1:], after, st.q_path[-1])
-                    note = f"moved in {T:.3g} s, loaded with the next step's tau_st"
-                else:
-                    final_tau = holding_torque_after(plan, scene, hand, step)
-                    run.ramp_to(hold if final_tau is None else final_tau, st.object_path[-1:], after, st.q_path[-1])
-                    note = f"moved in {T:.3g} s, " + (
-                        "torque kept (final grasp not rebuilt)" if final_tau is None else "final grasp's tau_st")
+                after_tau, src = _hold_after(plan, scene, hand, step, nxt)
+                run.ramp_to(hold if after_tau is None else after_tau, st.object_path[-1:], after, st.q_path[-1])
+                note = f"moved in {T:.3g} s, " + {"next": "loaded with the next step's tau_st",
+                                                  "final": "final grasp's tau_st",
+                                                  "none": "torque kept (final grasp not rebuilt)"}[src]
             else:
                 note = _object_motion(run, plan, scene, hand, step, nxt, pose0)
         except _Drop as e:
@@ -874,6 +868,17 @@ HOLD_PROJECTOR_EVERY = 25
 #: torque takes it along its path) lasts the finger's move time ``T`` with the posture rate raised
 #: to at least this many over ``T`` (1/s), so the finger keeps up with its path
 LINK_RELEASE_TIME_CONSTANTS = 3.0
+
+
+def _hold_after(plan: Plan, scene: Scene, hand: HandKinematics, step: PlanStep,
+                nxt: Transition | None) -> tuple[Array | None, str]:
+    """The torque that holds the grasp once ``step`` is done, and where it comes from: the next
+    step's ``tau_st`` (``"next"``), else the final grasp's (``"final"``,
+    :func:`sim.final_grasp.holding_torque_after`), else None (``"none"``: not rebuilt)."""
+    if nxt is not None and nxt.tau_stationary is not None:
+        return nxt.tau_stationary, "next"
+    final_tau = holding_torque_after(plan, scene, hand, step)
+    return final_tau, "none" if final_tau is None else "final"
 
 
 def control_model(options: PlanSimulationOptions, run: _Run) -> str:
@@ -1028,10 +1033,10 @@ def _object_motion(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, st
     run.run(options.motion_time, lambda t: tau0 + smooth_ramp(t, T) * (chosen - tau0), st.object_path, free, q_of,
             stop=braking)
     reached = progress["reached"] > 0
-    if nxt is not None and nxt.tau_stationary is not None:
-        hold, src = nxt.tau_stationary, "the next step's tau_st"
-    elif (final_tau := holding_torque_after(plan, scene, hand, step)) is not None:
-        hold, src = final_tau, "the final grasp's tau_st"
+    after_tau, which = _hold_after(plan, scene, hand, step, nxt)
+    if after_tau is not None:
+        hold = after_tau
+        src = "the next step's tau_st" if which == "next" else "the final grasp's tau_st"
     else:
         hold = st.tau_stationary if st.tau_stationary is not None else chosen
         src = "its own tau_st (final grasp not rebuilt)"
