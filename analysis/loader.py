@@ -328,6 +328,33 @@ else:  # pragma: no cover - PyYAML built without libyaml
     YAML_LOADERS = (_LimitedLoader,)
 
 
+def _check_unique_keys(node: yaml.MappingNode) -> None:
+    """SceneError naming the line of a key written twice in one YAML mapping (PyYAML keeps the
+    last one silently, so a scene's first ``contacts:`` would be lost without a word). Merge
+    keys (``<<``) are left to the constructor."""
+    seen: dict[tuple[str, str], int] = {}
+    for key, _ in node.value:
+        if not isinstance(key, yaml.ScalarNode) or key.tag == "tag:yaml.org,2002:merge":
+            continue
+        line = key.start_mark.line + 1
+        if (key.tag, key.value) in seen:
+            raise SceneError((), f"cannot parse YAML: line {line}, column {key.start_mark.column + 1}: "
+                                 f"duplicate key {key.value!r} "
+                                 f"(first written at line {seen[key.tag, key.value]}); write each key once")
+        seen[key.tag, key.value] = line
+
+
+def _unique_json_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """``object_pairs_hook`` for :func:`json.loads`: SceneError for a key written twice in one
+    object (the standard library keeps the last one silently)."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise SceneError((), f"cannot parse JSON: duplicate key {key!r} in one object; write each key once")
+        out[key] = value
+    return out
+
+
 def _expanded_size(root: yaml.Node) -> int:
     """Nodes of a composed YAML graph with every alias counted as a copy (iterative, memoised
     per node: linear in the graph, not in its expansion); SceneError for a recursive alias."""
@@ -343,6 +370,8 @@ def _expanded_size(root: yaml.Node) -> int:
         if isinstance(node, yaml.SequenceNode):
             children = list(node.value)
         elif isinstance(node, yaml.MappingNode):
+            if not done:
+                _check_unique_keys(node)
             children = [n for pair in node.value for n in pair]
         if done:
             open_.discard(key)
@@ -416,7 +445,9 @@ def _parse(source: str | bytes, suffix: str, max_bytes: int, yaml_loader: type |
         raise SceneError((), f"cannot parse {kind}: binary data (a NUL character), not a text file")
     if kind == "JSON":
         try:
-            data = json.loads(text)
+            data = json.loads(text, object_pairs_hook=_unique_json_object)
+        except SceneError:
+            raise
         except json.JSONDecodeError as e:
             raise SceneError((), f"cannot parse JSON: line {e.lineno}, column {e.colno}: {e.msg}") from None
         except RecursionError:

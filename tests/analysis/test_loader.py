@@ -135,6 +135,31 @@ def test_yaml_loaders_read_every_example_as_its_json(path: Path, loader: type) -
         assert parse_scene_data(yaml.safe_dump(data, default_flow_style=flow), ".yaml", yaml_loader=loader) == data
 
 
+@pytest.mark.parametrize(("text", "where"), [
+    ("dim: 2\ncontacts: []\nname: a\ncontacts: [1]\n",
+     "line 4, column 1: duplicate key 'contacts' (first written at line 2)"),
+    ("object: {radius: 1, radius: 2}\n", "line 1, column 21: duplicate key 'radius' (first written at line 1)"),
+    ("fingers:\n  - name: f\n    links: []\n    name: g\n",
+     "line 4, column 5: duplicate key 'name' (first written at line 2)"),
+])
+def test_yaml_duplicate_keys_are_refused_with_their_lines(text: str, where: str, loader: type) -> None:
+    """A key written twice in one mapping is refused (PyYAML would keep the last silently)."""
+    assert str(_error(text, ".yaml", loader)) == f"scene: cannot parse YAML: {where}; write each key once"
+
+
+def test_yaml_equal_keys_in_different_mappings_merges_and_aliases_are_kept(loader: type) -> None:
+    text = "a: &m {k: 1}\nb: *m\nc: {k: 2, <<: *m}\nd: [{k: 3}, {k: 4}]\n"
+    assert parse_scene_data(text, ".yaml", yaml_loader=loader) == {
+        "a": {"k": 1}, "b": {"k": 1}, "c": {"k": 2}, "d": [{"k": 3}, {"k": 4}]}
+
+
+def test_json_duplicate_keys_are_refused() -> None:
+    e = _error('{"dim": 2, "contacts": [], "contacts": [1]}', ".json")
+    assert str(e) == "scene: cannot parse JSON: duplicate key 'contacts' in one object; write each key once"
+    assert e.errors[0]["type"] == "scene_file"
+    assert parse_scene_data('{"a": {"k": 1}, "b": {"k": 2}}') == {"a": {"k": 1}, "b": {"k": 2}}
+
+
 def test_json_syntax_error_names_line_and_column() -> None:
     assert "line 2, column 1" in str(_error('{"a": 1,\n}', ".json"))
 

@@ -88,6 +88,8 @@ def test_alias_bomb_upload_is_4xx_fast_and_small(client: TestClient) -> None:
     ("set.yaml", "name: !!set {a, b}\n", "!!set is not a JSON value"),
     ("tab.yaml", "dim: 2\n\tname: x\n", "line 2, column 1"),
     ("binary.json", b"\x89PNG\r\n\x1a\n\xff\xfe", "not UTF-8 text"),
+    ("twice.yaml", "dim: 2\nname: a\nname: b\n", "line 3, column 1: duplicate key 'name'"),
+    ("twice.json", '{"dim": 2, "name": "a", "name": "b"}', "duplicate key 'name' in one object"),
 ])
 def test_upload_of_bad_files_is_422_naming_the_reason(limited: TestClient, name: str, content: str | bytes,
                                                       reason: str) -> None:

@@ -42,6 +42,7 @@ COMMANDS = [["analyze"], ["modes"], ["simulate", "--combination", "DDDFF"], ["pl
         f"{c}: &{c} [" + ", ".join([f"*{p}"] * 6) + "]\n" for p, c in zip("abcdefgh", "bcdefghi", strict=True))
     ).encode(), "aliases"),
     ("date.yaml", b"name: 2020-01-01\n", "name: a YAML date is not a JSON value"),
+    ("twice.yaml", b"dim: 2\nname: a\nname: b\n", "line 3, column 1: duplicate key 'name'"),
 ])
 def test_bad_scene_files_exit_2_with_one_line(tmp_path: Path, command: list[str], name: str, content: bytes,
                                               reason: str) -> None:
