@@ -14,13 +14,16 @@
   leave the light lane free and take almost none of its CPU.
 
 :func:`analysis_lane` and :func:`geometry_lane` are the cost estimates: which lane a request goes
-to. The lane that served a request is in its ``X-Lane`` header.
+to. The lane that served a request is in its ``X-Lane`` header, on its errors as well
+(:func:`use_lane` and :class:`LaneHeader`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from typing import Any, Literal
+
+from starlette.requests import Request
 
 from api.workers import LOWEST_NICE, ProcessPool
 
@@ -65,3 +68,32 @@ async def run_in_lane(lane: Lane, light: ProcessPool, heavy: ProcessPool, kind: 
     """Run ``kind`` on the next free worker of ``lane`` (see the module docstring)."""
     pool = heavy if lane == "heavy" else light
     return await pool.run(kind, payload, timeout=timeout)
+
+
+def use_lane(request: Request, lane: Lane) -> Lane:
+    """Record that ``request`` is served by ``lane``: its response carries ``X-Lane``, whether
+    the route returns or raises (an error answered by an exception handler included)."""
+    request.state.lane = lane
+    return lane
+
+
+class LaneHeader:
+    """ASGI middleware: ``X-Lane`` on the response of a request that :func:`use_lane` recorded,
+    added when the response starts (so errors built by exception handlers carry it too)."""
+
+    def __init__(self, app: Any):
+        self.app = app
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+
+        async def send_with_lane(msg: Any) -> None:
+            lane = (scope.get("state") or {}).get("lane")
+            if msg["type"] == "http.response.start" and lane is not None:
+                headers = [(k, v) for k, v in msg.get("headers", []) if k.lower() != b"x-lane"]
+                msg = {**msg, "headers": [*headers, (b"x-lane", str(lane).encode())]}
+            await send(msg)
+
+        await self.app(scope, receive, send_with_lane)

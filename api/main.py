@@ -24,7 +24,7 @@ from api import errors
 from api.cache import RepeatedBodies, ResultCache
 from api.http_methods import AllowedMethods
 from api.jobs import JobRunner
-from api.lanes import HEAVY_NICE
+from api.lanes import HEAVY_NICE, LaneHeader
 from api.routes import analyses, enumerations, health, plans, robot_files, robots, scenes
 from api.schemas import ErrorBody
 from api.settings import Settings, get_settings
@@ -94,6 +94,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.include_router(robots.router_for(settings))  # POST /robots: uploaded URDFs (exports CTP_DATA_DIR)
     app.add_middleware(errors.BodySizeLimit, limit=settings.max_body_bytes)
     app.add_middleware(AllowedMethods)
+    app.add_middleware(LaneHeader)
     app.add_middleware(RepeatedBodies, path="/analyses", limit=settings.max_body_bytes)  # outermost
     app.mount("/static", StaticFiles(directory=STATIC), name="static")
     app.openapi = lambda: _openapi(app)  # type: ignore[method-assign]

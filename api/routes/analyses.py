@@ -23,7 +23,7 @@ from api.deps import (
     combination_length_error,
 )
 from api.errors import ApiError
-from api.lanes import analysis_lane, run_in_lane
+from api.lanes import analysis_lane, run_in_lane, use_lane
 from api.schemas import AnalysisCreate, AnalysisPublic, ErrorBody
 
 router = APIRouter(tags=["analyses"])
@@ -82,6 +82,7 @@ async def create_analysis(raw: Annotated[AnalysisCreate, SkipValidation], reques
         # the geometric checks (contact points on their bodies, normals in their cones) build the
         # hand's kinematics: the worker makes them (analysis.loader.scene_from_dict) before the
         # analysis, so the server spends no CPU on them; a SceneError is a 422 located in "scene"
+        use_lane(request, lane)
         result = await run_in_lane(lane, light, pool, "analysis", payload, timeout=settings.request_time_limit)
         return AnalysisPublic.model_validate(result).model_dump_json().encode()
 
@@ -91,5 +92,4 @@ async def create_analysis(raw: Annotated[AnalysisCreate, SkipValidation], reques
     body_sha256 = request.scope.get(BODY_SHA256)
     if body_sha256:  # the same bytes again: answered before routing (api.cache.RepeatedBodies)
         cache.remember_body(body_sha256, key)
-    headers = {"X-Cache": how, **({"X-Lane": lane} if how == "miss" else {})}
-    return Response(content, media_type="application/json", headers=headers)
+    return Response(content, media_type="application/json", headers={"X-Cache": how})

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any
 
-from fastapi import APIRouter, File, Response, UploadFile
+from fastapi import APIRouter, File, Request, UploadFile
 from pydantic import SkipValidation
 
 from analysis.exceptions import SceneError
@@ -13,7 +13,7 @@ from analysis.scene import Scene
 from api.bodies import validated
 from api.deps import AnalysisPoolDep, LightPoolDep, SettingsDep, _hand_size_error, check_hand_size, check_raw_hand_size
 from api.errors import ApiError
-from api.lanes import geometry_lane, run_in_lane, upload_lane
+from api.lanes import geometry_lane, run_in_lane, upload_lane, use_lane
 from api.schemas import ContactsCreate, ContactsPublic, ErrorBody, ExampleScene, GeometryCreate
 from api.workers import TaskError, TaskTimeout
 
@@ -41,7 +41,7 @@ def list_examples(settings: SettingsDep) -> list[dict[str, Any]]:
                                                                   422: {"model": ErrorBody}})
 async def upload_scene(file: Annotated[UploadFile, File(description="a scene, .json or .yaml")],
                        settings: SettingsDep, light: LightPoolDep, pool: AnalysisPoolDep,
-                       response: Response) -> dict[str, Any]:
+                       request: Request) -> dict[str, Any]:
     """Validate an uploaded scene file and return it as JSON (422 names the bad field).
 
     The file goes through the scene files' one parser (:func:`analysis.loader.parse_scene_data`:
@@ -56,8 +56,7 @@ async def upload_scene(file: Annotated[UploadFile, File(description="a scene, .j
     name = (file.filename or "scene.json").lower()
     suffix = ".yaml" if name.endswith((".yaml", ".yml")) else ".json"
     payload = {"raw": raw, "suffix": suffix, "max_bytes": settings.max_body_bytes, "max_joints": settings.max_joints}
-    lane = upload_lane(len(raw))
-    response.headers["X-Lane"] = lane
+    lane = use_lane(request, upload_lane(len(raw)))
     try:
         out = await run_in_lane(lane, light, pool, "upload", payload, timeout=settings.request_time_limit)
     except TaskError as e:
@@ -81,7 +80,7 @@ async def upload_scene(file: Annotated[UploadFile, File(description="a scene, .j
 
 @router.post("/geometry", responses={413: {"model": ErrorBody}, 422: {"model": ErrorBody}})
 async def scene_geometry(raw: Annotated[GeometryCreate, SkipValidation], settings: SettingsDep,
-                         light: LightPoolDep, pool: AnalysisPoolDep, response: Response) -> dict[str, Any]:
+                         light: LightPoolDep, pool: AnalysisPoolDep, request: Request) -> dict[str, Any]:
     """World coordinates to draw: each finger's links (segments and radii) for the scene's ``q``
     or for each of ``configurations``, fixed bodies, object, contacts (with friction-cone half angle).
 
@@ -99,8 +98,7 @@ async def scene_geometry(raw: Annotated[GeometryCreate, SkipValidation], setting
                            errors=[{"loc": ["configurations", k], "msg": f"needs {M} values",
                                     "type": "value_error"}])
     payload = {"scene": scene.model_dump(mode="json"), "configurations": body.configurations}
-    lane = geometry_lane(len(body.configurations or [None]), [len(f.q) for f in scene.fingers])
-    response.headers["X-Lane"] = lane
+    lane = use_lane(request, geometry_lane(len(body.configurations or [None]), [len(f.q) for f in scene.fingers]))
     return await run_in_lane(lane, light, pool, "geometry", payload, timeout=settings.request_time_limit)
 
 
@@ -108,7 +106,7 @@ async def scene_geometry(raw: Annotated[GeometryCreate, SkipValidation], setting
 @router.post("/contacts", response_model=ContactsPublic, responses={413: {"model": ErrorBody},
                                                                    422: {"model": ErrorBody}})
 async def scene_contacts(raw: Annotated[ContactsCreate, SkipValidation], settings: SettingsDep,
-                         light: LightPoolDep, pool: AnalysisPoolDep, response: Response) -> dict[str, Any]:
+                         light: LightPoolDep, pool: AnalysisPoolDep, request: Request) -> dict[str, Any]:
     """The contacts between the object and every finger link and fixed body at the scene's
     configuration, found from the geometry within ``tolerance`` (any ``contacts`` the scene has
     are replaced), the complete scene with them, and the near misses (closer than 10
@@ -119,5 +117,5 @@ async def scene_contacts(raw: Annotated[ContactsCreate, SkipValidation], setting
     check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
     body = await validated(ContactsCreate, raw)  # off the event loop (api/bodies.py)
     payload = {"scene": body.scene, "tolerance": body.tolerance, "mu": body.mu, "touch": body.touch}
-    response.headers["X-Lane"] = "light"
+    use_lane(request, "light")
     return await run_in_lane("light", light, pool, "contacts", payload, timeout=settings.request_time_limit)

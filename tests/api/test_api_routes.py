@@ -415,5 +415,7 @@ def test_geometric_scene_errors_are_422_naming_the_field(client: TestClient, rou
     out = r.json()
     assert out["detail"] == f"scene.{expected.value}"
     assert out["errors"][0]["loc"] == ["scene", "contacts", 1, "point"]
+    if route in ("/analyses", "/scenes/geometry"):  # found by the worker: the error says which lane
+        assert r.headers["x-lane"] == ("light" if route == "/scenes/geometry" else "heavy")
     if route in ("/enumerations", "/plans"):  # refused at the door: no job was stored
         assert client.get(route).json()["count"] == jobs_before

@@ -97,6 +97,7 @@ def test_upload_of_bad_files_is_422_naming_the_reason(limited: TestClient, name:
     assert r.status_code == 422, r.text
     body = r.json()
     assert reason in body["detail"] and body["errors"], body
+    assert r.headers["x-lane"] == ("light" if len(content) <= 64_000 else "heavy")  # the worker that found it
     if name in ("date.yaml", "bin.yaml", "set.yaml"):
         assert body["detail"].startswith("scene.name:") and body["errors"][0]["loc"] == ["scene", "name"], body
 
@@ -257,6 +258,7 @@ def test_geometry_has_a_time_limit_and_health_stays_quick(quick_limit: TestClien
     t.join(30)
     r = out[0]
     assert r.status_code == 422 and r.json()["limit"] == 1.0 and "time limit" in r.json()["detail"], r.text[:300]
+    assert r.headers["x-lane"] == "heavy"  # errors say which lane ran out of time
     assert time.perf_counter() - t0 < 8
     small = quick_limit.post("/scenes/geometry", json={"scene": PLANAR})  # the lane has a fresh worker
     assert small.status_code == 200 and small.json()["frames"]
