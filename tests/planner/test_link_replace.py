@@ -94,12 +94,12 @@ def test_pinned_placement_keeps_the_other_arm_and_the_elbow(baxter: Scene, relea
     assert found >= 1
 
 
-def test_baxter_lays_its_forearm_on_the_box_again_and_the_plan_verifies(baxter: Scene, released) -> None:  # type: ignore[no-untyped-def]
+@pytest.fixture(scope="module")
+def relaid(baxter: Scene, released) -> tuple[Plan, object, object]:  # type: ignore[no-untyped-def]
+    """The release plan with the re-placement appended, the edge and its validation."""
     g, p, state = released
-    hand = g.hand
     edges = replace_edges(g, state)
     assert edges
-    steps = list(p.steps)
     done = None
     for e in edges:
         assert e.validate is not None
@@ -109,6 +109,19 @@ def test_baxter_lays_its_forearm_on_the_box_again_and_the_plan_verifies(baxter: 
             break
     assert done is not None, g.rejections
     e, (cost, t) = done
+    new = g.states[e.node]
+    held = g.analysis(new).stationary(all_f(new))
+    assert held is not None
+    full = replace(p, steps=(*p.steps, PlanStep(len(p.steps), t, state, new)), final_contacts=new.bodies(),
+                   final_combination=all_f(new), cost=p.cost + cost, final_tau=np.asarray(held.tau))
+    return full, e, done[1]
+
+
+def test_baxter_lays_its_forearm_on_the_box_again_and_the_plan_verifies(baxter: Scene, released, relaid) -> None:  # type: ignore[no-untyped-def]
+    g, p, state = released
+    hand = g.hand
+    full, e, (cost, t) = relaid
+    steps = list(p.steps)
     assert t.kind == "contact"
     assert cost == pytest.approx(t.cost)
     new = g.states[e.node]
@@ -120,9 +133,7 @@ def test_baxter_lays_its_forearm_on_the_box_again_and_the_plan_verifies(baxter: 
     right = hand.finger_slice(1)
     np.testing.assert_array_equal(t.q_path[:, right], np.tile(state.q[right], (len(t.q_path), 1)))
     np.testing.assert_array_equal(t.object_path, np.tile(state.pose_vector(), (len(t.q_path), 1)))
-    steps.append(PlanStep(len(steps), t, state, new))
-    full = replace(p, steps=tuple(steps), final_contacts=new.bodies(), final_combination=all_f(new),
-                   cost=p.cost + cost)
+    assert [s.transition.kind for s in full.steps] == ["release", "contact"]
     assert verify_plan(baxter, full) == []
     limits = hand_torque_limits(baxter, hand)
     assert limits is not None
@@ -141,3 +152,32 @@ def test_link_replacement_is_off_by_default(baxter: Scene) -> None:
     g.add(st)
     assert all(s.data is None or s.data.kind != "contact" or "forearm" not in str(s.data.contacts_after)
                for s in g.successors(st.key()))
+
+
+def test_the_kept_elbow_moving_is_caught_by_verify(baxter: Scene, relaid) -> None:  # type: ignore[no-untyped-def]
+    """The check of a finger's kept contacts in verify_plan can fail: the contact step's path with
+    the left shoulder turned by 1e-3 rad at its inner waypoints moves the kept elbow."""
+    full, _, _ = relaid
+    step = full.steps[-1]
+    q = step.transition.q_path.copy()
+    q[1:-1, 0] += 1e-3
+    bad = replace(full, steps=(full.steps[0], replace(step, transition=replace(step.transition, q_path=q))))
+    problems = verify_plan(baxter, bad)
+    assert any("kept contact" in m and "left_lower_elbow" in m for m in problems), problems
+
+
+def test_the_release_and_re_placement_replay_in_mujoco(baxter: Scene, relaid) -> None:  # type: ignore[no-untyped-def]
+    """One continuous MuJoCo replay (sim.plan_replay) of the release and the re-placement: the box
+    is not dropped and stays within the replay's tolerance of where it was (the plan does not move
+    it: the error is relative to the replay's floor scale, ``min_radius``), the box within 0.1 mm of
+    its start, the left arm ends at the contact configuration within 0.01 rad."""
+    from sim.plan_replay import simulate_plan
+
+    full, _, _ = relaid
+    rep = simulate_plan(baxter, full)
+    js = rep.to_json()
+    assert rep.ok and not rep.dropped, js
+    assert js["relative_position_error"] <= 0.05 and js["relative_rotation_error"] <= 0.05, js
+    assert js["position_error"] <= 1e-4, js  # m: the box stays where it was
+    assert [s.kind for s in rep.steps] == ["release", "contact"]
+    assert rep.steps[-1].joint_error <= 0.01
