@@ -181,3 +181,34 @@ def test_the_release_and_re_placement_replay_in_mujoco(baxter: Scene, relaid) ->
     assert js["position_error"] <= 1e-4, js  # m: the box stays where it was
     assert [s.kind for s in rep.steps] == ["release", "contact"]
     assert rep.steps[-1].joint_error <= 0.01
+
+
+def test_a_free_arm_lays_its_forearm_over_a_face_point(baxter: Scene, released) -> None:  # type: ignore[no-untyped-def]
+    """Without kept contacts the pinned placement lays the forearm over the target point itself (a
+    new configuration): the left arm's contacts dropped from the released state, every placement
+    found keeps the right arm's joints, touches the face at the target point (residual 1e-9 m),
+    lies flat on it and differs from the arm's configuration."""
+    g, _, state = released
+    hand = g.hand
+    free = state.with_contacts(tuple(c for c in state.contacts if not c.body.startswith("left/")), state.q)
+    assert kept_contacts(g, free, 0) == []
+    forearm = hand.resolve_body("left/left_upper_forearm")
+    sc = state_scene(baxter, free, hand)
+    right, left = hand.finger_slice(1), hand.finger_slice(0)
+    found = 0
+    for target in face_targets(g, free, 0):
+        pl = place_link_pinned(g, free, 0, forearm, target)
+        if pl is None:
+            continue
+        found += 1
+        assert pl.over_point
+        np.testing.assert_array_equal(pl.q[right], free.q[right])
+        x = hand.point_position(forearm, pl.point_body, pl.q)
+        assert float(np.linalg.norm(x - target.p)) <= 1e-8
+        assert abs(float(object_signed_distance(sc, x))) <= 1e-9
+        np.testing.assert_allclose(_inward_normal(sc, x), -target.n, rtol=0, atol=1e-6)
+        r = hand.body_radius(forearm)
+        for e in hand.body_segment(forearm, pl.q):
+            assert abs(float(target.n @ (np.asarray(e) - target.p)) - r) <= TOL
+        assert float(np.linalg.norm(pl.q[left] - free.q[left])) > 1e-3
+    assert found >= 2
