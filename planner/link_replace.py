@@ -61,6 +61,8 @@ STEP = 0.02
 #: Gauss-Newton iterations of one placement or projection, and the largest step (rad) of one
 ITERS = 60
 MAX_STEP = 0.3
+#: Gauss-Newton gives up when its residual has not halved over this many steps
+STALL = 10
 #: residual (scene units) of the equations at which a placement or a projection is accepted
 RESIDUAL_TOL = 1e-9
 #: a kept contact point may move this much (scene units) along the transfer
@@ -175,16 +177,21 @@ def _equations(hand: HandKinematics, q: Array, new: tuple[BodyRef, None, FaceTar
 def _gauss_newton(hand: HandKinematics, finger: int, q: Array, new: tuple[BodyRef, None, FaceTarget, bool] | None,
                   kept: list[_Kept]) -> tuple[Array, float, int]:
     """Least-norm Gauss-Newton steps on the finger's joints (clipped to its limits, each at most
-    :data:`MAX_STEP`) until the residual is below :data:`RESIDUAL_TOL`; ``(q, residual, iterations)``."""
+    :data:`MAX_STEP`) until the residual is below :data:`RESIDUAL_TOL` (or has not halved over
+    :data:`STALL` steps); ``(q, residual, iterations)``."""
     sl = hand.finger_slice(finger)
     lo, hi = joint_limits(hand, finger)
     q = np.array(q, dtype=float)
     res = np.inf
+    history: list[float] = []
     for it in range(ITERS):
         e, J = _equations(hand, q, new, kept, sl)
         res = float(np.max(np.abs(e), initial=0.0))
         if res <= RESIDUAL_TOL:
             return q, res, it
+        history.append(res)
+        if len(history) > STALL and res > 0.5 * history[-1 - STALL]:
+            return q, res, it  # stalled: not halved in STALL steps (no solution near, or a joint limit)
         dq = np.linalg.lstsq(J, -e, rcond=1e-10)[0]
         nrm = float(np.linalg.norm(dq))
         if nrm > MAX_STEP:
