@@ -212,3 +212,21 @@ def test_a_free_arm_lays_its_forearm_over_a_face_point(baxter: Scene, released) 
             assert abs(float(target.n @ (np.asarray(e) - target.p)) - r) <= TOL
         assert float(np.linalg.norm(pl.q[left] - free.q[left])) > 1e-3
     assert found >= 2
+
+
+def test_the_graph_expands_re_placements_with_the_option(baxter: Scene, released) -> None:  # type: ignore[no-untyped-def]
+    """With ``link_replacement`` the graph's successors of the released state include the lazy
+    re-placement of the forearm (a new node with the forearm touching); without it they do not."""
+    from planner.options import PlannerOptions
+
+    _, p, state = released
+    hand = HandKinematics.from_scene(baxter)
+    found = {}
+    for on in (False, True):
+        g = ContactStateGraph(baxter, hand, p.goal, PlannerOptions(link_replacement=on))
+        g.add(state)
+        succ = g.successors(state.key())
+        found[on] = [s for s in succ if s.validate is not None
+                     and "left/left_upper_forearm" in g.states[s.node].bodies()]
+    assert found[False] == []
+    assert len(found[True]) == 1
