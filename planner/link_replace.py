@@ -1,30 +1,36 @@
 """Link re-placement edges (paper eq. 33, D -> F with any link): whole-arm regrasps.
 
 An arm that has let go of a link (:mod:`planner.link_release`) lays that link down again, flat on
-a face of a box object at another point: Baxter's forearm, lifted off the box while its elbow
-stays on it, comes back to the side of the box at another angle. :mod:`planner.contact_edges`
-makes new contacts with fingertips only; this module makes them with any link that touched the
-object in the scene (its contact's body point is the side of the link that faces the object).
+a face of a box object: Baxter's forearm, lifted off the box while its elbow stays on it, comes
+back to the side of the box. :mod:`planner.contact_edges` makes new contacts with fingertips
+only; this module makes them with any link that touched the object in the scene and touches
+nothing now (:func:`replace_links`), at the face points of :func:`face_targets` (a 3 x 3 grid on
+each face, away from the other contacts and the face's edges).
 
 **The pinned placement** (:func:`place_link_pinned`). Only the moving finger's joints ``q_f``
 change; every other finger keeps its joints (the holding chains are pinned), the object stays
 where it is. ``q_f`` solves, by Gauss-Newton steps of least norm from the state's joints (so the
 answer is near them), the equations ``e(q_f) = 0``:
 
-* the new link's contact body point ``x(q)`` at the face point ``p + g n`` (3 rows; ``n`` the
-  face's outward normal, ``g`` the height: 0 on the face, ``approach`` for the pre-contact);
-* both ends ``a(q)``, ``b(q)`` of the link's axis at height ``r + g`` over the face plane,
-  ``n . (a - p) = r + g`` (2 rows; ``r`` the link radius): the link lies flat on the face,
-  touching it along its side, and the body point is the one nearest the face;
+* both ends ``a(q)``, ``b(q)`` of the new link's axis at height ``r + g`` over the face plane,
+  ``n . (a - p) = r + g`` (2 rows; ``n`` the face's outward normal, ``p`` the target face point,
+  ``r`` the link radius, ``g`` the height: 0 on the face, ``approach`` for the pre-contact): the
+  link lies flat on the face, touching it along its side;
+* ``p`` under the axis line, ``(n x u) . (p - a) = 0`` (1 row, ``u`` the axis direction);
 * each contact the finger keeps (sticking, eq. 5): its body point at its world point (3 rows), and
   the ends of its link that lie at the contact height at the start stay there (the kept link does
   not tilt into the face about its contact point).
 
-The contact made is ``(x, -n)`` in the object frame with the body point ``x`` on the link, at
-``p`` (inside the face, away from its edges, so the face's normal cone is ``n`` alone).
+Where no solution puts the link over ``p`` (the kept contacts leave it no other way to lie on the
+face: Baxter's forearm turns relative to its kept elbow only about its own axis), the row for
+``p`` is dropped and the contact is the point of the link's side nearest ``p``. The contact made
+is at the link's side point ``x = a + t (b - a) - r n`` over the face (``t`` within ``EDGE_MARGIN``
+of the axis' ends), with the inward normal ``-n`` in the object frame; ``x`` must lie inside one
+face, away from its edges, so the face's normal cone is ``-n`` alone (:func:`_inside_face`).
 
-**The transfer** (:func:`validate_replace`): from the state's joints to the pre-contact and then
-to the contact, joint-space straight lines cut into steps of :data:`STEP` rad, each step projected
+**The transfer** (:func:`validate_replace`): from the state's joints to the pre-contact (where
+one exists: a link laid flat beside a kept contact cannot rise parallel to the face) and then to
+the contact, joint-space straight lines cut into steps of :data:`STEP` rad, each step projected
 back onto the kept contacts' equations (the kept contacts do not move, to :data:`KEPT_TOL`), the
 whole path certified collision-free by :func:`~planner.collision.path_clearance_certified` for
 every link of the finger against the object, the fixed bodies and the other fingers (the kept
