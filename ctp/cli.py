@@ -569,6 +569,9 @@ def plan(
     tolerance: Annotated[float | None, typer.Option(
         help="pose goal: older single tolerance, the default of both of the above")] = None,
     time_limit: Annotated[float | None, typer.Option(help="seconds for the search")] = None,
+    link_replacement: Annotated[bool, typer.Option(
+        help="also lay a link an arm let go of flat on a face of a box object again, the other arms "
+             "pinned (whole-arm regrasps)")] = False,
     out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
     replay: Annotated[bool, typer.Option(help="replay the whole plan in MuJoCo (one continuous simulation)")] = False,
     posture_rate: Annotated[float, typer.Option(help="--replay: " + POSTURE_HELP)] = POSTURE_RATE,
@@ -585,6 +588,7 @@ def plan(
 
     from planner import Goal
     from planner import plan as make_plan
+    from planner.options import PlannerOptions
 
     _check_out(out, "--out")
     sc = _load(scene)
@@ -614,7 +618,8 @@ def plan(
             bar.update(task, completed=fraction, description=message[:60])
 
         try:
-            result = make_plan(sc, g, progress=step, time_limit=time_limit)
+            result = make_plan(sc, g, progress=step, time_limit=time_limit,
+                               options=PlannerOptions(link_replacement=link_replacement))
         except SceneError as e:
             _fail(str(e))
         except CTPError as e:

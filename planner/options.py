@@ -37,6 +37,11 @@ class PlannerOptions:
     #: sinks rho (1 - cos) into the face, 1.5 um after 1 cm, refused by planner.verify), and the
     #: third re-analysed motion has no torque set (32)
     link_sliding: bool = False
+    #: lazy edges that lay a link an arm let go of (a link that touched the object in the scene)
+    #: flat on a face of a box object again, the other fingers' joints pinned and the arm's kept
+    #: contacts held (:mod:`planner.link_replace`); off by default: they add states to every search
+    #: on a box (the bundled plans are planned without them)
+    link_replacement: bool = False
     #: longest object motion towards a goal pose, and length of a sliding motion (object sizes):
     #: the torque of T is chosen for the start of the motion (first order), so a longer way is
     #: taken in several motions, each re-analysed

@@ -40,11 +40,15 @@ from analysis.pose import Pose
 from analysis.scene import Disk, Scene
 from analysis.torques import torque_set
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel, path_clearance_certified
+from planner.link_release import OVERLAP_SLACK, ROUNDING
 from planner.manifold import pose_displacement
 from planner.motion_length import line_contacts, torque_margin, waypoint_state
 from planner.object_motion import MIN_DIRECTION_COSINE, direction_cosines, motion_manifold, rolls_on_links
 from planner.plan import Plan, PlanStep
 from planner.state import GraspState, StateAnalysis, all_f
+
+#: a contact the moving finger keeps during a ``contact`` step may move this much (scene units)
+KEPT_CONTACT_TOL = 1e-6
 
 
 def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]:
@@ -76,12 +80,31 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
         moved = np.flatnonzero(np.any(np.abs(np.diff(t.q_path, axis=0)) > 0, axis=0))
         fingers = {f for f in range(len(hand.fingers))
                    for j in moved if j in range(*hand.finger_slice(f).indices(hand.M))}
+        made = [r for c in step.after.contacts if c.body not in t.contacts_before
+                and (r := hand.resolve_body(c.body)) is not None]
         for f in fingers:
             sl = hand.finger_slice(f)
             chain = hand.fingers[f]
-            tip = BodyRef(f"{chain.name}/{chain.n_joints - 1}", f, chain.n_joints - 1)
-            ok, clear, _ = path_clearance_certified(model, f, step.before.q, t.q_path[:, sl], step.before.position,
-                                                    step.before.rotation, [tip], len(t.q_path) - 2)
+            new_refs = [r for r in made if r.finger == f] or [BodyRef(f"{chain.name}/{chain.n_joints - 1}", f,
+                                                                      chain.n_joints - 1)]
+            kept = [(i, r) for i, c in enumerate(step.before.contacts)
+                    if (r := hand.resolve_body(c.body)) is not None and r.finger == f]
+            for i, r in kept:  # a finger that keeps contacts while it moves (a link laid on a face)
+                drift = max(float(np.linalg.norm(hand.point_position(r, step.before.contacts[i].point_body, q)
+                                                 - step.before.world_point(i))) for q in t.q_path)
+                if drift > KEPT_CONTACT_TOL:
+                    problems.append(f"{tag}: kept contact {i} ({step.before.contacts[i].body}) moves by {drift:.3g}")
+            kept_refs = [r for _, r in kept]
+            allow = model.start_allowance(f, step.before.q, step.before.position, step.before.rotation)
+            if kept_refs:  # the overlaps of an arm's neighbouring links may deepen as in a link release
+                allow = np.where(allow < 0.0, allow - OVERLAP_SLACK * model.min_radius, allow) - ROUNDING
+            n = len(t.q_path)
+            ok, clear, _ = path_clearance_certified(model, f, step.before.q, t.q_path[: n - 1, sl],
+                                                    step.before.position, step.before.rotation, kept_refs, 0, allow)
+            if ok:
+                ok, clear, _ = path_clearance_certified(model, f, step.before.q, t.q_path[n - 2:, sl],
+                                                        step.before.position, step.before.rotation,
+                                                        [*kept_refs, *new_refs], 0, allow)
             if not ok:
                 problems.append(f"{tag}: finger path collides (clearance {clear:.3g})")
     elif t.kind == "object_motion":

@@ -142,3 +142,23 @@ def test_hold_rate_default_is_the_replays_and_bad_rates_exit_2(tmp_path) -> None
     for bad in ("-1", "nan", "inf"):
         r = CliRunner().invoke(app, ["simulate", str(plan_file), "--hold-rate", bad])
         assert r.exit_code == 2 and "hold-rate" in r.output and "Traceback" not in r.output, (bad, r.output)
+
+
+def test_ctp_plan_link_replacement_reaches_the_planner(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """``--link-replacement`` turns on the planner's link re-placement edges (off without it)."""
+    import planner
+    from planner.options import PlannerOptions
+
+    seen: list[PlannerOptions | None] = []
+    real = planner.plan
+
+    def spy(*args, options=None, **kwargs):  # type: ignore[no-untyped-def]
+        seen.append(options)
+        return real(*args, options=options, max_expansions=1, **kwargs)
+
+    monkeypatch.setattr(planner, "plan", spy)
+    scene = str(Path(__file__).resolve().parents[2] / "examples" / "planar_disk_envelope.json")
+    for flag, want in (([], False), (["--link-replacement"], True)):
+        r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
+        assert r.exit_code in (0, 1), r.output
+        assert seen[-1] is not None and seen[-1].link_replacement is want
