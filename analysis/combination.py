@@ -43,6 +43,10 @@ from analysis.stationary import (
 )
 from analysis.torques import FrictionUncertainty, TorqueSet, friction_uncertainty, realisable_direction, torque_set
 
+#: The full report's note where (18) has no solution: DAFC is not sampled.
+NO_GRASP_DAFC = ("DAFC (22) not sampled: Theorem 1 defines it for an object held by a stationary grasp (18), "
+                 "and there is none")
+
 
 @dataclass(frozen=True)
 class CombinationParts:
@@ -344,8 +348,13 @@ def analyze_combination(
     summary = summarize(parts, stationary_known=grasp is not None, oracle=oracle)
     if samples is None:  # the circle/sphere densely, higher-dimensional motion spaces coarsely
         samples = default_samples(ms.a_bar)
-    dset = dafc_set(oracle, samples=samples) if ms.a_bar else None
+    # DAFC (22) is where joint torques added to a stationary grasp tau_st (18) do work on the object:
+    # Theorem 1 presupposes that grasp. Without one the LP of (22) still has "members" (the weight
+    # alone does work along the directions the object would fall in), which are no DAFC: not sampled
+    dset = dafc_set(oracle, samples=samples) if ms.a_bar and grasp is not None else None
     notes: list[str] = [stationary_note] if stationary_note else []
+    if ms.a_bar and grasp is None:
+        notes.append(NO_GRASP_DAFC)
     if dset is not None and dset.description_error:
         notes.append(dset.description_error)
     if grasp is None and ms.a_bar and "degenerate" in summary.reason:

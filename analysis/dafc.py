@@ -825,16 +825,16 @@ class SectorSearch:
         return self.test is not None or self.open_boxes == 0
 
 
-def _unit_angle(theta: float, d: int) -> Array:
+def unit_angle(theta: float, d: int) -> Array:
     """Unit slip direction at angle ``theta`` in tangent coordinates ``(d - 1,)``."""
     return np.array([np.cos(theta)]) if d == 2 else np.array([np.cos(theta), np.sin(theta)])
 
 
-def _half(sec: Sector) -> float:
+def sector_half(sec: Sector) -> float:
     return np.pi if sec is None else 0.5 * (sec[1] - sec[0])
 
 
-def _split(sec: Sector, d: int) -> list[Sector]:
+def split_sector(sec: Sector, d: int) -> list[Sector]:
     """Children of a sector: a free point becomes the two signs (2-D) or four quarter turns (3-D)
     centred on the tangent axes; an interval is halved."""
     if sec is None:
@@ -846,13 +846,13 @@ def _split(sec: Sector, d: int) -> list[Sector]:
     return [(a, m), (m, b)]
 
 
-def _sector_rows(sec: Sector, d: int, margin: float) -> tuple[Array, Array]:
+def sector_rows(sec: Sector, d: int, margin: float) -> tuple[Array, Array]:
     """Rows ``R sigma >= r`` (tangent coordinates) putting the slip ``sigma`` in the sector, at
     least ``margin`` along its bisector (so the point really slides); none for a free point."""
     if sec is None:
         return np.zeros((0, d - 1)), np.zeros(0)
     a, b = sec
-    c = _unit_angle(0.5 * (a + b), d)
+    c = unit_angle(0.5 * (a + b), d)
     rows, rhs = [c], [margin]
     if d == 3 and b > a:
         rows += [np.array([-np.sin(a), np.cos(a)]), np.array([np.sin(b), -np.cos(b)])]
@@ -884,10 +884,10 @@ def _relaxed_box_model(oracle: DAFCOracle, fixed_G: Array, dep: list[int], box: 
         n_col = sel.c_slices[i].start
         mu = float(sy.mu[i])
         first = L_c + len(cols)
-        h = _half(sec)
+        h = sector_half(sec)
         if sec is None:
             ang = 2 * np.pi * np.arange(SECTOR_FREE_SIDES) / SECTOR_FREE_SIDES
-            dirs = [np.array([1.0]), np.array([-1.0])] if d == 2 else [_unit_angle(t, 3) for t in ang]
+            dirs = [np.array([1.0]), np.array([-1.0])] if d == 2 else [unit_angle(t, 3) for t in ang]
             r_mu = mu if d == 2 else mu / np.cos(np.pi / SECTOR_FREE_SIDES)
             for j in range(d - 1):
                 cols.append(sy.G_blocks[i] @ T[j])
@@ -895,13 +895,13 @@ def _relaxed_box_model(oracle: DAFCOracle, fixed_G: Array, dep: list[int], box: 
                 rows.append(({first + j: float(c[j]) for j in range(d - 1)} | {n_col: -r_mu}, 0.0))
             slots.append(tuple(range(first, first + d - 1)))
         elif h <= 0.0:
-            e = T.T @ _unit_angle(sec[0], d)  # (d,) world slip direction
+            e = T.T @ unit_angle(sec[0], d)  # (d,) world slip direction
             fixed_G = fixed_G.copy()
             fixed_G[:, n_col] = fixed_G[:, n_col] - mu * (sy.G_blocks[i] @ e)
             slots.append(())
         else:
             for th in sec:
-                cols.append(-(sy.G_blocks[i] @ (T.T @ _unit_angle(th, d))))
+                cols.append(-(sy.G_blocks[i] @ (T.T @ unit_angle(th, d))))
             rows.append(({first: -1.0, first + 1: -1.0, n_col: mu}, 0.0))
             rows.append(({first: 1.0, first + 1: 1.0, n_col: -mu / np.cos(h)}, 0.0))
             slots.append((first, first + 1))
@@ -917,7 +917,7 @@ def _relaxed_box_model(oracle: DAFCOracle, fixed_G: Array, dep: list[int], box: 
         for j, v in entries.items():
             A_ub[fs.C.shape[0] + 1 + r, j] = v
         b_ub[fs.C.shape[0] + 1 + r] = rhs
-    lb = np.r_[np.full(L_c, -np.inf), [0.0 if _half(sec) < np.pi else -np.inf
+    lb = np.r_[np.full(L_c, -np.inf), [0.0 if sector_half(sec) < np.pi else -np.inf
                                          for sec, sl in zip(box, slots, strict=True) for _ in sl]]
     model = LPModel(n, A_ub=A_ub, b_ub=b_ub, A_eq=snap(oracle.Xi.T @ G),
                     b_eq=snap(-(oracle.Xi.T @ sy.w_ex) / sy.scales.force), lb=lb, feasibility=LP_FEAS_TOL)
@@ -1045,9 +1045,9 @@ def _relaxed_box_lp(oracle: DAFCOracle, dr: Array, fixed_G: Array, dep: list[int
             t = x[list(sl)]  # friction in tangent coordinates; the slip opposes it
             targets.append(-t if np.linalg.norm(t) > 1e-12 else np.zeros(d - 1))
         elif not sl:
-            targets.append(_unit_angle(sec[0], d))
+            targets.append(unit_angle(sec[0], d))
         else:
-            targets.append(x[sl[0]] * _unit_angle(sec[0], d) + x[sl[1]] * _unit_angle(sec[1], d))
+            targets.append(x[sl[0]] * unit_angle(sec[0], d) + x[sl[1]] * unit_angle(sec[1], d))
     return float(objective * sc.force + dr @ sy.w_ex), targets
 
 
@@ -1092,7 +1092,7 @@ def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector,
         rows = slice(k * d, (k + 1) * d)
         S_z = T @ oracle.Ps[rows, a_bar:]  # (d-1, nr): sigma = S_0 + S_z z
         S_0 = T @ (oracle.Ps[rows, :a_bar] @ u)  # (d-1,)
-        R, rhs = _sector_rows(sec, d, margin)
+        R, rhs = sector_rows(sec, d, margin)
         for rr, v in zip(R, rhs, strict=True):
             row(-(rr @ S_z))
             b.append(float(rr @ S_0 - v))
@@ -1131,13 +1131,13 @@ def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector,
 def _box_cone(oracle: DAFCOracle, box: tuple[Sector, ...]) -> Array:
     """Generators ``(k, a)`` (unit rows, both signs of lines) of the cone of allowable motions
     ``dzeta_c`` whose S-point slips lie in the sector ``box`` (edges included): ``B dzeta_c <= 0``
-    (eq. 20) and the sector rows of :func:`_sector_rows` on ``T_k P_s dzeta_c`` (cdd)."""
+    (eq. 20) and the sector rows of :func:`sector_rows` on ``T_k P_s dzeta_c`` (cdd)."""
     ms, sy, sel = oracle.ms, oracle.system, oracle.sel
     d = sy.d
     rows = [oracle.B] if oracle.B.shape[0] else []
     for k, sec in enumerate(box):
         T = sy.tangents[sel.s_index[k]]
-        R, _ = _sector_rows(sec, d, 0.0)
+        R, _ = sector_rows(sec, d, 0.0)
         if R.shape[0]:
             rows.append(-(R @ T @ oracle.Ps[k * d:(k + 1) * d]))  # R sigma >= 0
     if not rows:
@@ -1257,8 +1257,8 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
                 open_boxes += 1
                 open_bound = max(open_bound, -neg)
                 continue
-            widest = max(range(nS), key=lambda q: _half(box[q]))
-            pending.extend((*box[:widest], child, *box[widest + 1:]) for child in _split(box[widest], d))
+            widest = max(range(nS), key=lambda q: sector_half(box[q]))
+            pending.extend((*box[:widest], child, *box[widest + 1:]) for child in split_sector(box[widest], d))
             continue
         box = pending.pop()
         boxes += 1
@@ -1334,8 +1334,8 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
             if t.member:
                 dim = int(np.linalg.matrix_rank(U, tol=1e-9))
                 return SectorSearch(t, boxes, 0, float(bounds.max()), dim)
-        widest = max(range(nS), key=lambda q: _half(box[q]))
-        if _half(box[widest]) <= leaf_half:
+        widest = max(range(nS), key=lambda q: sector_half(box[q]))
+        if sector_half(box[widest]) <= leaf_half:
             open_boxes += 1  # a leaf: the bound is above the tolerance, no tested motion is a member
             open_bound = max(open_bound, float(bounds.max()))
             continue

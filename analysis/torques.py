@@ -5,7 +5,9 @@ friction-uncertainty combination (end of section IV-C).
    direction ``dzeta~_d``, pick the redundancy minimising ``phi = |dq|`` (CasADi/IPOPT,
    :mod:`analysis.solvers.casadi_nlp`), subject to the set S of (30). In the plane an S-point's
    unit slip is one of two tangents, so (31) is feasible exactly when one of ``2^#S`` LPs is
-   (:func:`planar_slip_patterns`); when none is, IPOPT is not run.
+   (:func:`planar_slip_patterns`); when none is, IPOPT is not run. In 3-D a branch and bound
+   over slip sectors (:func:`analysis.torque_sectors.slip_sector_screen`) proves it infeasible
+   for many directions with a few LPs; then IPOPT is not run either.
 2. Set (32) for that motion: with the slips fixed every condition of (30) is linear in the
    contact forces, so ``T = {tau(f_c) : f_c in P}`` with
 
@@ -39,6 +41,7 @@ from analysis.solvers.highs import solve_lp
 from analysis.statics import Statics
 from analysis.stationary import StationaryGrasp
 from analysis.torque_conditions import TorqueConditions, torque_conditions
+from analysis.torque_sectors import slip_sector_screen
 
 #: Vertex enumeration of the force polyhedron behind T is attempted up to this dimension; above
 #: it (e.g. several 3-D F-points with 16-sided pyramids: up to k^#F vertices) T is reported by
@@ -195,6 +198,15 @@ def _chosen_motion(
         if not planar_slip_patterns(p, T_s):
             raise EmptyTorqueSet("problem (31) has no solution for this direction (no slip-sign pattern of the "
                                  "S-points admits it: an LP each)")
+    elif p.with_forces and system.d == 3 and sel.s_index:
+        # in 3-D a branch and bound over slip sectors can prove (31) infeasible with a few LPs
+        T_3 = np.array([system.tangents[i] for i in sel.s_index]).reshape(-1, 2, 3)  # (#S, 2, 3)
+        try:
+            screen = slip_sector_screen(p, T_3)
+        except SolverError:
+            screen = None  # undecided: IPOPT decides as before
+        if screen is not None and screen.infeasible:
+            raise EmptyTorqueSet(f"problem (31) has no solution for this direction ({screen.reason})")
     z0 = oracle.redundancy_for(u)
     res = solve_redundancy(p, zeta0=z0)
     if not res.found and start is not None and start.zeta_c is not None:

@@ -43,6 +43,11 @@ _OK = {"Solve_Succeeded", "Solved_To_Acceptable_Level"}
 
 #: Built IPOPT solvers kept per thread (least recently used dropped).
 SOLVERS_KEPT = 32
+#: The unit slip is ``s / sqrt(|s|^2 + SLIP_SMOOTH)`` (smooth at ``s = 0``): with ``|s| >= slip_min``
+#: its length is at least ``1 / sqrt(1 + SLIP_SMOOTH / slip_min^2)`` (``1 - 5e-5`` for ``1e-4``).
+SLIP_SMOOTH = 1e-12
+#: IPOPT's tolerance on the constraints' violation (unscaled) at ``Solve_Succeeded``.
+CONSTR_VIOL_TOL = 1e-9
 
 
 @dataclass(frozen=True)
@@ -104,7 +109,7 @@ def _force_constraints(p: RedundancyNLP, cons: _Constraints, zc: ca.SX, f: ca.SX
         s = slip_all[k * d : (k + 1) * d]
         nrm2 = ca.sumsqr(s)
         cons.add(nrm2, p.slip_min**2, np.inf)
-        w = w - p.mu_s[k] * f[col] * (ca.DM(p.G_s_blocks[k]) @ (s / ca.sqrt(nrm2 + 1e-12)))
+        w = w - p.mu_s[k] * f[col] * (ca.DM(p.G_s_blocks[k]) @ (s / ca.sqrt(nrm2 + SLIP_SMOOTH)))
     if p.Xi.shape[1]:
         cons.add(ca.DM(p.Xi.T) @ w, 0.0, 0.0)
     return w
@@ -117,7 +122,7 @@ def _ipopt_options(max_iter: int) -> dict[str, Any]:
         "ipopt.sb": "yes",
         "ipopt.max_iter": max_iter,
         "ipopt.tol": 1e-10,
-        "ipopt.constr_viol_tol": 1e-9,
+        "ipopt.constr_viol_tol": CONSTR_VIOL_TOL,
         "error_on_fail": False,
     }
 

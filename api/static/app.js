@@ -432,7 +432,8 @@ function renderReport(r) {
   if (r.dafc) {
     const d = r.dafc, k = d.member.filter(Boolean).length;
     line(box, `DAFC (22): dim ${d.dim}, ${k} of ${d.member.length} sampled directions, ${d.exact ? "exact" : "sampled"}; example ${fmtVec(r.example_direction)}`);
-  } else line(box, "DAFC (22): empty (the object cannot move)");
+  } else line(box, r.a_bar === 0 ? "DAFC (22): empty (the object cannot move)"
+    : "DAFC (22): not sampled (no stationary grasp (18), which it presupposes)");
   if (r.dpfc) {
     const dp = r.dpfc;
     line(box, dp.enumerated ? `DPFC (28): dim ${dp.dim}, ${dp.vertices.length} vertices, ${dp.rays.length} rays${dp.lines && dp.lines.length ? `, ${dp.lines.length} lines` : ""}`
@@ -462,7 +463,8 @@ function drawDafc() {
   T.innerHTML = ""; R.innerHTML = "";
   const r = state.report, dim = state.scene.dim;
   if (!r || !r.dafc) {
-    for (const s of [T, R]) el(s, "text", { x: 14, y: 130, "font-size": 12 }, "no DAFC (the object cannot move)");
+    const why = r && r.a_bar !== 0 ? "DAFC not sampled (no stationary grasp)" : "no DAFC (the object cannot move)";
+    for (const s of [T, R]) el(s, "text", { x: 14, y: 130, "font-size": 12 }, why);
     $("dafc-caption").textContent = "";
     return;
   }

@@ -527,16 +527,16 @@ def test_slip_sector_bounds_reused_from_certified_optima_match_scipy() -> None:
     does happen."""
     from scipy.optimize import linprog
 
-    from analysis.dafc import _box_vertex, _relaxed_box_lp, _relaxed_box_model, _split
+    from analysis.dafc import _box_vertex, _relaxed_box_lp, _relaxed_box_model, split_sector
 
     system = example_system("sphere_four_finger_wrap")
     oracle = _oracle(system, "SFFFSSDFS")
     ms, sc = oracle.ms, system.scales
     nS = len(oracle.sel.s_index)
     dep = list(range(nS))
-    quarters = _split(None, 3)
+    quarters = split_sector(None, 3)
     boxes = [tuple(None for _ in dep), tuple(quarters[k % 4] for k in dep),
-             tuple(_split(quarters[1], 3)[0] if k == 0 else quarters[(k + 2) % 4] for k in dep)]
+             tuple(split_sector(quarters[1], 3)[0] if k == 0 else quarters[(k + 2) % 4] for k in dep)]
     rng = np.random.default_rng(4)
     certified = 0
     for box in boxes:
@@ -571,13 +571,13 @@ def _cone_motions(oracle: DAFCOracle, box: tuple, draws: int, rng: np.random.Gen
     cube ``|dzeta_c|_inf <= 1`` (scipy), and random convex combinations of them. ``(n, a)``."""
     from scipy.optimize import linprog
 
-    from analysis.dafc import _sector_rows
+    from analysis.dafc import sector_rows
 
     sy, ms = oracle.system, oracle.ms
     d = sy.d
     rows = [oracle.B] if oracle.B.shape[0] else []
     for k, sec in enumerate(box):
-        R, _ = _sector_rows(sec, d, 0.0)
+        R, _ = sector_rows(sec, d, 0.0)
         if R.shape[0]:
             rows.append(-(R @ sy.tangents[oracle.sel.s_index[k]] @ oracle.Ps[k * d:(k + 1) * d]))
     A = np.vstack(rows) if rows else np.zeros((0, ms.a))
@@ -602,7 +602,7 @@ def test_tightened_sectors_hold_every_sliding_motion_of_the_box(combination: str
     slip component over the cone cut by the unit cube, scipy, is at rounding level)."""
     from scipy.optimize import linprog
 
-    from analysis.dafc import SLIP_TOL, _box_cone, _sector_rows, _slip_maps, _split, _tighten
+    from analysis.dafc import SLIP_TOL, _box_cone, _slip_maps, _tighten, sector_rows, split_sector
 
     system = example_system("sphere_four_finger_wrap")
     oracle = _oracle(system, combination)
@@ -614,8 +614,8 @@ def test_tightened_sectors_hold_every_sliding_motion_of_the_box(combination: str
     for _ in range(10):  # nested boxes: split a random point of a random box, a few times
         box = boxes[int(rng.integers(len(boxes)))]
         k = int(rng.integers(nS))
-        boxes.append((*box[:k], _split(box[k], d)[int(rng.integers(2))], *box[k + 1:]))
-    boxes += [tuple(_split(None, d)[q] if k == 0 else None for k in range(nS)) for q in range(4)]
+        boxes.append((*box[:k], split_sector(box[k], d)[int(rng.integers(2))], *box[k + 1:]))
+    boxes += [tuple(split_sector(None, d)[q] if k == 0 else None for k in range(nS)) for q in range(4)]
     dropped = narrowed = 0
     for box in boxes:
         Z = _box_cone(oracle, box)
@@ -624,7 +624,7 @@ def test_tightened_sectors_hold_every_sliding_motion_of_the_box(combination: str
             dropped += 1
             rows = [oracle.B] if oracle.B.shape[0] else []
             for k, sec in enumerate(box):
-                R, _ = _sector_rows(sec, d, 0.0)
+                R, _ = sector_rows(sec, d, 0.0)
                 if R.shape[0]:
                     rows.append(-(R @ S[k]))
             A = np.vstack(rows)

@@ -13,9 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from closure_helpers import scipy_lp
 
 import analysis.solvers.casadi_nlp as nlp
-from analysis.combination import CombinationParts, analyze_combination
+from analysis.combination import NO_GRASP_DAFC, CombinationParts, analyze_combination
 from analysis.contacts import build_system
 from analysis.dafc import _allowable_faces, _face_crossing, dafc_set, default_samples, sample_directions
 from analysis.loader import load_scene
@@ -118,9 +119,22 @@ def test_refinement_resolves_faces_of_the_allowable_cone_exactly(planar) -> None
 
 
 def test_report_states_its_refinement(planar) -> None:
-    out = analyze_combination(planar, "SSDFD").to_json()
+    out = analyze_combination(planar, "FSFSD").to_json()
     assert "allowable cone" in out["dafc"]["refinement"]
     assert len(out["dafc"]["directions"]) == len(out["dafc"]["member"]) == len(out["dafc"]["work"])
+
+
+@pytest.mark.parametrize("combination", ["SSDFD", "FDSFD", "DFSSD"])
+def test_report_does_not_sample_dafc_without_a_stationary_grasp(planar, combination: str) -> None:
+    """Where (18) has no solution (scipy: no f in F with G_c f = -w_ex) the report has no sampled
+    DAFC and says why: Theorem 1 defines DAFC for an object held by a stationary grasp."""
+    parts = CombinationParts.build(planar, combination)
+    st, fs, sy = parts.st, parts.fs, parts.system
+    assert scipy_lp(np.zeros(st.G_c.shape[1]), fs.C, np.zeros(fs.C.shape[0]), st.G_c, -sy.w_ex)[0] == 2
+    out = analyze_combination(planar, combination).to_json()
+    assert out["feasible"] is False and out["reason"].startswith("no stationary grasp (18)")
+    assert "dafc" not in out and "stationary" not in out and out["a_bar"] > 0
+    assert NO_GRASP_DAFC in out["notes"]
 
 
 # -- LP shortcuts of the DAFC oracle (issue 13): each decides exactly as the LP it replaces -------
