@@ -31,6 +31,7 @@ from analysis.geometry import object_size, shape_signed_distance
 from analysis.kinematics import HandKinematics
 from analysis.pose import Pose
 from analysis.scene import Scene
+from analysis.solvers.highs import lp_memo
 from planner.goals import Goal, check_combination, goal_heuristic, goal_reached
 from planner.graph import ContactStateGraph
 from planner.motion_edges import UNSUPPORTED
@@ -364,8 +365,16 @@ def plan(
 
     ``progress(fraction, message)`` is called after every node expansion (fraction of the
     expansion budget, or of ``time_limit`` when that is larger) and at the end with 1.0.
-    ``time_limit`` (seconds) bounds the search; reaching it gives ``found = False``.
+    ``time_limit`` (seconds) bounds the search; reaching it gives ``found = False``. The states
+    of one search pose many of the same LPs again; each is solved once
+    (:func:`analysis.solvers.highs.lp_memo`).
     """
+    with lp_memo():
+        return _plan(scene, goal, progress, time_limit, max_expansions, options)
+
+
+def _plan(scene: Scene, goal: Goal, progress: Progress | None, time_limit: float | None, max_expansions: int,
+          options: PlannerOptions | None) -> Plan:
     check_goal(scene, goal)
     if time_limit is not None and not time_limit > 0:
         raise SceneError(("time_limit",), "must be positive")
