@@ -29,9 +29,9 @@ from analysis._types import Array
 from analysis.exceptions import SceneError
 from analysis.geometry import object_size, shape_signed_distance
 from analysis.kinematics import HandKinematics
+from analysis.memo import scope as analysis_memo
 from analysis.pose import Pose
 from analysis.scene import Scene
-from analysis.solvers.highs import lp_memo
 from planner.goals import Goal, check_combination, goal_heuristic, goal_reached
 from planner.graph import ContactStateGraph
 from planner.motion_edges import UNSUPPORTED
@@ -366,10 +366,10 @@ def plan(
     ``progress(fraction, message)`` is called after every node expansion (fraction of the
     expansion budget, or of ``time_limit`` when that is larger) and at the end with 1.0.
     ``time_limit`` (seconds) bounds the search; reaching it gives ``found = False``. The states
-    of one search pose many of the same LPs again; each is solved once
-    (:func:`analysis.solvers.highs.lp_memo`).
+    of one search pose many of the same LPs and statics again; each is computed once
+    (:mod:`analysis.memo`).
     """
-    with lp_memo():
+    with analysis_memo():
         return _plan(scene, goal, progress, time_limit, max_expansions, options)
 
 

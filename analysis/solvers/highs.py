@@ -15,27 +15,23 @@ An optimal :class:`LPResult` carries the multipliers (row duals, reduced costs) 
 own residuals: primal (equality, inequality, bound violation), dual (stationarity) and the
 duality gap.
 
-Within :func:`lp_memo` (the planner opens one per plan) a one-shot LP (:func:`solve_lp`) whose
-data, options and method equal, bit for bit, those of an LP already solved in the block is not
-solved again: its result is returned (its arrays read-only). A fresh HiGHS instance is
-deterministic, so this is the result the solve would give; the grasp states of a search pose the
-same LPs again (a released contact's state and its parent's combination with that contact
-``D``).
+Within :func:`analysis.memo.scope` (the planner opens one per plan) a one-shot LP
+(:func:`solve_lp`) whose data, options and method equal, bit for bit, those of an LP already
+solved in the scope is not solved again: its result is returned (its arrays read-only). A fresh
+HiGHS instance is deterministic, so this is the result the solve would give.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
-from contextlib import contextmanager
-from contextvars import ContextVar
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Literal
 
 import highspy
 import numpy as np
 from highspy._core import _Highs
 from numpy.typing import NDArray
 
+from analysis import memo
 from analysis._types import Array
 from analysis.exceptions import SolverError, SolverTimeLimit
 
@@ -417,37 +413,6 @@ def _bounds(b: Array | float | None, n: int, default: float) -> Array:
     return arr
 
 
-#: The results of :func:`solve_lp` by their exact data, inside :func:`lp_memo` (else ``None``).
-_MEMO: ContextVar[dict[tuple[Any, ...], LPResult] | None] = ContextVar("lp_memo", default=None)
-
-
-@contextmanager
-def lp_memo() -> Iterator[None]:
-    """Within the block, :func:`solve_lp` solves each distinct LP once (see the module notes); a
-    block inside another shares the outer one's results. Only results are kept: an LP that raised
-    is solved (and raises) again."""
-    if _MEMO.get() is not None:
-        yield
-        return
-    token = _MEMO.set({})
-    try:
-        yield
-    finally:
-        _MEMO.reset(token)
-
-
-def _key(*arrays: Any) -> tuple[Any, ...]:
-    """The exact data of a one-shot LP: each argument's shape and bytes as float (``None`` kept)."""
-    out: list[Any] = []
-    for a in arrays:
-        if a is None:
-            out.append(None)
-        else:
-            v = np.asarray(a, dtype=float)
-            out.append((v.shape, v.tobytes()))
-    return tuple(out)
-
-
 def solve_lp(
     c: Array,
     A_ub: Array | None = None,
@@ -462,28 +427,23 @@ def solve_lp(
     method: Literal["warm", "defaults", "ipm"] = "warm",
 ) -> LPResult:
     """One-shot LP (see :class:`LPModel`; ``method``: its settings, or after
-    :meth:`LPModel.use_defaults` or :meth:`LPModel.use_ipm`). Inside :func:`lp_memo` an LP with
-    the same data, options and method as one solved before returns that result."""
+    :meth:`LPModel.use_defaults` or :meth:`LPModel.use_ipm`). Inside :func:`analysis.memo.scope`
+    an LP with the same data, options and method as one solved before returns that result."""
     c = np.asarray(c, dtype=float).ravel()
-    memo = _MEMO.get()
-    key: tuple[Any, ...] | None = None
-    if memo is not None:
-        key = (_key(c, A_ub, b_ub, A_eq, b_eq, lb, ub), bool(maximize), time_limit, float(feasibility), method)
-        got = memo.get(key)
-        if got is not None:
-            return got
-    model = LPModel(len(c), A_ub, b_ub, A_eq, b_eq, lb, ub, time_limit, feasibility)
-    if method == "defaults":
-        model.use_defaults()
-    elif method == "ipm":
-        model.use_ipm()
-    res = model.solve(c, maximize=maximize)
-    if memo is not None and key is not None:
-        for a in (res.x, res.y_ub, res.y_eq, res.z):
-            if a is not None:
-                a.setflags(write=False)  # shared by every caller of the same LP
-        memo[key] = res
-    return res
+
+    def solve() -> LPResult:
+        model = LPModel(len(c), A_ub, b_ub, A_eq, b_eq, lb, ub, time_limit, feasibility)
+        if method == "defaults":
+            model.use_defaults()
+        elif method == "ipm":
+            model.use_ipm()
+        return model.solve(c, maximize=maximize)
+
+    if not memo.active():
+        return solve()
+    key = ("solve_lp", memo.exact_key(c, A_ub, b_ub, A_eq, b_eq, lb, ub), bool(maximize), time_limit,
+           float(feasibility), method)
+    return memo.remembered(key, solve, lambda r: (r.x, r.y_ub, r.y_eq, r.z))
 
 
 class RowBoundLP:

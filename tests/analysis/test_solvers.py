@@ -306,11 +306,12 @@ def test_set_bounds_then_cold_solve_equals_a_new_model():
 
 
 def test_lp_memo_solves_each_distinct_lp_once(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Inside ``lp_memo`` an LP with the same data, options and method returns the first result
+    """Inside ``analysis.memo.scope`` an LP with the same data, options and method returns the first result
     (one HiGHS model built), equal bit for bit to a fresh solve outside the block; an LP differing
     in one entry, the sense, the tolerance or the method is solved anew; the shared arrays are
     read-only; nested blocks share one memo, and a new block starts empty."""
     import analysis.solvers.highs as highs
+    from analysis import memo
 
     built = {"n": 0}
     orig_init = highs.LPModel.__init__
@@ -328,7 +329,7 @@ def test_lp_memo_solves_each_distinct_lp_once(monkeypatch: pytest.MonkeyPatch) -
     args = {"A_ub": A, "b_ub": b, "A_eq": A[:1], "b_eq": A[:1] @ np.full(n, 0.5), "lb": 0.0, "ub": 2.0}
     fresh = solve_lp(c, **args)  # type: ignore[arg-type]
     assert fresh.status == "optimal" and built["n"] == 1
-    with highs.lp_memo():
+    with memo.scope():
         first = solve_lp(c, **args)  # type: ignore[arg-type]
         again = solve_lp(c.copy(), **{k: np.array(v, dtype=float) for k, v in args.items()})  # type: ignore[arg-type]
         assert again is first and built["n"] == 2
@@ -345,11 +346,11 @@ def test_lp_memo_solves_each_distinct_lp_once(monkeypatch: pytest.MonkeyPatch) -
                   solve_lp(c, **args, feasibility=1e-9),  # type: ignore[arg-type]
                   solve_lp(c, **args, method="defaults")]  # type: ignore[arg-type]
         assert built["n"] == 6 and all(o is not first for o in others)
-        with highs.lp_memo():  # nested: the outer block's results
+        with memo.scope():  # nested: the outer block's results
             assert solve_lp(c, **args) is first  # type: ignore[arg-type]
         assert built["n"] == 6
         np.testing.assert_allclose(others[3].x, fresh.x, atol=1e-8)  # type: ignore[arg-type]  # the same optimum
-    with highs.lp_memo():
+    with memo.scope():
         assert solve_lp(c, **args) is not first  # type: ignore[arg-type]
     assert solve_lp(c, **args) is not first  # type: ignore[arg-type]
     assert built["n"] == 8

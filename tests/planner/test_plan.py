@@ -57,11 +57,11 @@ def test_plan_json(planar_plan, tmp_path) -> None:  # type: ignore[no-untyped-de
     assert data["stats"]["nodes_expanded"] >= 1
 
 
-def test_the_lp_memo_leaves_the_plan_unchanged(planar_scene: Scene, planar_plan,  # type: ignore[no-untyped-def]
+def test_the_analysis_memo_leaves_the_plan_unchanged(planar_scene: Scene, planar_plan,  # type: ignore[no-untyped-def]
                                                monkeypatch: pytest.MonkeyPatch) -> None:
-    """``plan`` solves each distinct LP of its states once (``lp_memo``): planned with every LP
-    solved afresh, the planar plan's JSON is the same but for the timings, and the memo did save
-    LP models (the states pose the same LPs again)."""
+    """``plan`` solves each distinct LP of its states, and computes each distinct statics and motion
+    space, once (``analysis.memo``): planned with everything afresh, the planar plan's JSON is the
+    same but for the timings, and the memo did save LP models (the states pose the same LPs again)."""
     import analysis.solvers.highs as highs
 
     plan_mod = importlib.import_module("planner.plan")  # (the package's `plan` is the function)
@@ -76,7 +76,7 @@ def test_the_lp_memo_leaves_the_plan_unchanged(planar_scene: Scene, planar_plan,
     monkeypatch.setattr(highs.LPModel, "__init__", counting_init)
     memo = plan(planar_scene, Goal(type="active"))
     with_memo, built["n"] = built["n"], 0
-    monkeypatch.setattr(plan_mod, "lp_memo", contextlib.nullcontext)
+    monkeypatch.setattr(plan_mod, "analysis_memo", contextlib.nullcontext)
     fresh = plan(planar_scene, Goal(type="active"))
     assert with_memo < built["n"]
 
