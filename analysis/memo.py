@@ -9,7 +9,10 @@ those of an earlier one returns the earlier result (:func:`remembered`): the one
 (eq. 8-10) and of the motion space (eq. 7, 19). Each is a function of those inputs only (LAPACK
 and a fresh HiGHS instance are deterministic), so the result is the one the computation would
 give; its arrays are made read-only, as every caller in the scope shares them. Outside a scope
-nothing is kept, and a computation that raises is not remembered.
+nothing is kept, and a computation that raises is not remembered. A scope keeps the
+:data:`MAX_ENTRIES` results used last (the repeats come from a state and its parent, close
+together in a search; the nine-contact wrap's plan computes 2,522 distinct ones, about 19 kB each
+with their keys).
 """
 
 from __future__ import annotations
@@ -23,7 +26,10 @@ import numpy as np
 
 T = TypeVar("T")
 
-#: The results of the open scope by key (``None``: no scope open).
+#: Results a scope keeps (the least recently used is dropped beyond it).
+MAX_ENTRIES = 1024
+
+#: The results of the open scope by key, least recently used first (``None``: no scope open).
 _SCOPE: ContextVar[dict[tuple[Any, ...], Any] | None] = ContextVar("analysis_memo", default=None)
 
 
@@ -66,11 +72,14 @@ def remembered(key: tuple[Any, ...], compute: Callable[[], T], arrays: Callable[
     if memo is None:
         return compute()
     if key in memo:
-        got: T = memo[key]
+        got: T = memo.pop(key)
+        memo[key] = got  # the most recently used last
         return got
     got = compute()
     for a in arrays(got):
         if isinstance(a, np.ndarray):
             a.setflags(write=False)
     memo[key] = got
+    if len(memo) > MAX_ENTRIES:
+        del memo[next(iter(memo))]
     return got

@@ -62,3 +62,25 @@ def test_a_computation_that_raises_is_not_remembered() -> None:
         x = memo.remembered(("u",), lambda: (np.zeros(2),), lambda r: r)
         assert memo.remembered(("u",), lambda: (np.ones(2),), lambda r: r) is x
     assert not memo.active()
+
+
+def test_a_scope_keeps_the_results_used_last(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Beyond ``MAX_ENTRIES`` the least recently used result is dropped (computed again if asked
+    for), a result used again is kept."""
+    monkeypatch.setattr(memo, "MAX_ENTRIES", 3)
+    calls = {"n": 0}
+
+    def value(k: int) -> tuple[np.ndarray]:
+        calls["n"] += 1
+        return (np.full(2, float(k)),)
+
+    with memo.scope():
+        first = [memo.remembered(("k", k), lambda k=k: value(k), lambda r: r) for k in range(3)]  # type: ignore[misc]
+        assert memo.remembered(("k", 0), lambda: value(0), lambda r: r) is first[0]  # 0 used again
+        memo.remembered(("k", 3), lambda: value(3), lambda r: r)  # drops 1, the least recently used
+        assert calls["n"] == 4
+        assert memo.remembered(("k", 0), lambda: value(0), lambda r: r) is first[0]
+        assert memo.remembered(("k", 2), lambda: value(2), lambda r: r) is first[2]
+        again = memo.remembered(("k", 1), lambda: value(1), lambda r: r)
+        assert again is not first[1] and calls["n"] == 5
+        np.testing.assert_array_equal(again[0], first[1][0])
