@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis import memo
 from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection, constrained_matrices
 from analysis.linalg import null_space, orth, pinv
@@ -107,12 +108,18 @@ def motion_space(system: GraspSystem, sel: Selection) -> MotionSpace:
     """
     A_c, A_s, A_d = constrained_matrices(system, sel)
     M = system.M
-    Lam = null_space(A_c)  # (M + D, a)
-    Lam_r_t = orth(Lam[M:])  # (D, a_bar)
-    J_c = A_c[:, :M]  # (L_c, M)
-    G_c_T = -A_c[:, M:]  # (L_c, D)
-    Lam_q_t = pinv(J_c) @ G_c_T @ Lam_r_t if M else np.zeros((0, Lam_r_t.shape[1]))
-    Lam_qr_t = null_space(J_c) if M else np.zeros((0, 0))
+
+    def bases() -> tuple[Array, Array, Array, Array]:
+        Lam = null_space(A_c)  # (M + D, a)
+        Lam_r_t = orth(Lam[M:])  # (D, a_bar)
+        J_c = A_c[:, :M]  # (L_c, M)
+        G_c_T = -A_c[:, M:]  # (L_c, D)
+        Lam_q_t = pinv(J_c) @ G_c_T @ Lam_r_t if M else np.zeros((0, Lam_r_t.shape[1]))
+        Lam_qr_t = null_space(J_c) if M else np.zeros((0, 0))
+        return Lam, Lam_r_t, Lam_q_t, Lam_qr_t
+
+    # a function of A_c and M only: remembered within a planner's search (analysis.memo)
+    Lam, Lam_r_t, Lam_q_t, Lam_qr_t = memo.remembered(("motion_space", memo.exact_key(A_c), M), bases, lambda r: r)
     return MotionSpace(M, Lam, Lam_r_t, Lam_q_t, Lam_qr_t, A_c, A_s, A_d)
 
 

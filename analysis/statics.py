@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis import memo
 from analysis._types import Array
 from analysis.contacts import GraspSystem, Selection
 from analysis.linalg import null_space, orth, pinv
@@ -44,12 +45,17 @@ def statics(system: GraspSystem, sel: Selection) -> Statics:
     """Build ``J_c = H_c J``, ``G_c = G H_c^T``, ``(J_c^T)^+``, ``Gamma``, ``D``, ``Xi``."""
     J_c = sel.H_c @ system.J  # (L_c, M)
     G_c = system.G @ sel.H_c.T  # (D, L_c)
-    if system.M:
-        JcT_pinv = pinv(J_c.T)  # (L_c, M)
-        Gamma = null_space(J_c.T)  # (L_c, p_bar)
-    else:
-        JcT_pinv = np.zeros((sel.L_c, 0))
-        Gamma = np.eye(sel.L_c)
-    D = G_c @ JcT_pinv  # (D, M)
-    Xi = orth(G_c @ Gamma)  # (D, p)
+
+    def bases() -> tuple[Array, Array, Array, Array]:
+        if system.M:
+            JcT_pinv = pinv(J_c.T)  # (L_c, M)
+            Gamma = null_space(J_c.T)  # (L_c, p_bar)
+        else:
+            JcT_pinv = np.zeros((sel.L_c, 0))
+            Gamma = np.eye(sel.L_c)
+        return JcT_pinv, Gamma, G_c @ JcT_pinv, orth(G_c @ Gamma)  # ..., D (D, M), Xi (D, p)
+
+    # a function of J_c and G_c only: remembered within a planner's search (analysis.memo)
+    JcT_pinv, Gamma, D, Xi = memo.remembered(("statics", memo.exact_key(J_c, G_c), system.M, sel.L_c), bases,
+                                             lambda r: r)
     return Statics(J_c, G_c, JcT_pinv, Gamma, D, Xi)

@@ -36,7 +36,7 @@ from analysis.contacts import GraspSystem, Selection
 from analysis.exceptions import NoStationaryGrasp, SolverError
 from analysis.friction import FrictionSet
 from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, snap
-from analysis.solvers.highs import LPModel, solve_lp
+from analysis.solvers.highs import solve_lp
 from analysis.statics import Statics
 from analysis.torque_limits import LIMIT_TOL, JointExcess, least_excess, limit_rows, over_limit
 
@@ -121,14 +121,10 @@ def min_total_normal(system: GraspSystem, st: Statics, fs: FrictionSet) -> tuple
     A_ub = np.vstack([fs.C, n_sum[None, :], A_lim])
     b_ub = np.r_[np.zeros(fs.C.shape[0]), GRIP_BOUND, b_lim]
     failure = "no method decided the LP"
-    for method in ("warm", "defaults", "ipm"):
-        model = LPModel(L_c, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, feasibility=LP_FEAS_TOL)
-        if method == "defaults":
-            model.use_defaults()
-        elif method == "ipm":
-            model.use_ipm()
+    methods: tuple[Literal["warm", "defaults", "ipm"], ...] = ("warm", "defaults", "ipm")
+    for method in methods:
         try:
-            res = model.solve(n_sum)
+            res = solve_lp(n_sum, A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, feasibility=LP_FEAS_TOL, method=method)
         except SolverError as e:  # undecided: ask the next method
             failure = str(e)
             continue

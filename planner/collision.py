@@ -17,6 +17,12 @@ certificate.
   against fixed bodies. :meth:`CollisionModel.clearance_terms` evaluates every (link, obstacle)
   pair of a finger at once with numpy (segment-segment, segment-sphere and segment-box distances
   vectorised over the pairs).
+* **Planar capsule fingers in float arithmetic.** In a planar scene whose fingers are all serial
+  chains turning about z, with a disk object and fixed segments or disks, a finger's clearance at
+  one configuration (and at up to :data:`PLANAR_ROWS` at once) is evaluated with plain floats
+  (:meth:`CollisionModel._planar_min`): the same terms, formulas, trims and allowances as the
+  numpy evaluation, without numpy's per-call overhead on arrays of two or three links; equal to
+  it to round-off (the disk's distance is taken about its centre, without the object's rotation).
 * **Overlaps at the start of a motion.** A grasp given by the scene may have capsules that
   overlap slightly (the Allegro example: the middle and ring links 0.3 mm into the object with
   the inflated radius, two non-adjacent thumb links 3 mm into each other, because the link
@@ -59,6 +65,7 @@ from __future__ import annotations
 
 import functools
 import itertools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -81,6 +88,9 @@ PENETRATION_TOL = 1e-6
 #: (the joint housing is mounted on the palm).
 BASE_TRIM = 0.15
 _EYE3 = np.eye(3)
+#: Up to this many configurations at once, a planar capsule finger's clearances are evaluated one
+#: at a time in float arithmetic (:meth:`CollisionModel._planar_min`), beyond it vectorised with numpy.
+PLANAR_ROWS = 24
 
 
 # --------------------------------------------------------------------------------------------
@@ -273,6 +283,102 @@ def _trimmed_at_base(A: Array, B: Array, base: Array, r_infl: Array) -> tuple[Ar
     skip = at_base & (2.0 * trim >= L)
     A2 = np.where(at_base[:, None], A + D * (trim / np.where(L > 0, L, 1.0))[:, None], A)
     return A2, skip
+
+
+# --------------------------------------------------------------------------------------------
+# Planar capsule fingers in float arithmetic (one configuration at a time)
+
+
+def _segment_distance_f(ax: float, ay: float, bx: float, by: float, cx: float, cy: float) -> float:
+    """Distance from the point ``(cx, cy)`` to the segment ``[(ax, ay), (bx, by)]`` in float
+    arithmetic: the formula of :func:`_shape_segments_distance` for a disk (the segment's point
+    nearest to the centre, ``t`` clipped to ``[0, 1]``)."""
+    ux, uy = ax - cx, ay - cy
+    dx, dy = bx - ax, by - ay
+    L2 = dx * dx + dy * dy
+    t = 0.0
+    if L2 > 0.0:
+        t = min(max(-(ux * dx + uy * dy) / L2, 0.0), 1.0)
+    vx, vy = ux + t * dx, uy + t * dy
+    return math.sqrt(vx * vx + vy * vy)
+
+
+def _segment_segment_distance_f(a0x: float, a0y: float, a1x: float, a1y: float,
+                                b0x: float, b0y: float, b1x: float, b1y: float) -> float:
+    """:func:`segment_segment_distances` of one planar pair in float arithmetic (the same
+    formulas and the same cases: a segment of squared length at most ``1e-15`` is a point)."""
+    d1x, d1y, d2x, d2y = a1x - a0x, a1y - a0y, b1x - b0x, b1y - b0y
+    rx, ry = a0x - b0x, a0y - b0y
+    a = d1x * d1x + d1y * d1y
+    e = d2x * d2x + d2y * d2y
+    f = d2x * rx + d2y * ry
+    c = d1x * rx + d1y * ry
+    b = d1x * d2x + d1y * d2y
+    a_s = a if a > 1e-15 else 1.0
+    if e > 1e-15:
+        den = a * e - b * b
+        s = min(max((b * f - c * e) / den, 0.0), 1.0) if den > 1e-15 else 0.0
+        t = (b * s + f) / e
+        if t < 0.0:
+            s, t = min(max(-c / a_s, 0.0), 1.0), 0.0
+        elif t > 1.0:
+            s, t = min(max((b - c) / a_s, 0.0), 1.0), 1.0
+    else:  # a point B
+        s, t = min(max(-c / a_s, 0.0), 1.0), 0.0
+    wx = (a0x + s * d1x) - (b0x + t * d2x)
+    wy = (a0y + s * d1y) - (b0y + t * d2y)
+    return math.sqrt(wx * wx + wy * wy)
+
+
+def _planar_points(chain: tuple[float, float, float, list[tuple[float, float]], list[float]],
+                   qf: Sequence[float]) -> list[tuple[float, float]]:
+    """The joints' positions and the tip ``(n + 1)`` of a planar serial chain (base angle, first
+    joint's position, link vectors, axis signs) at its joint values ``qf``: link ``k`` runs from
+    point ``k`` to point ``k + 1`` at the world angle ``theta_base + sum_{i <= k} a_i q_i``."""
+    theta, px, py, links, axes = chain
+    pts = [(px, py)]
+    for j, (vx, vy) in enumerate(links):
+        theta += axes[j] * qf[j]
+        c, s = math.cos(theta), math.sin(theta)
+        px, py = px + c * vx - s * vy, py + s * vx + c * vy
+        pts.append((px, py))
+    return pts
+
+
+def _planar_chain(chain: object) -> tuple[float, float, float, list[tuple[float, float]], list[float]] | None:
+    """A serial chain whose joints all turn about z in the plane ``z = 0`` (axes ``(0, 0, +-1)``,
+    a base rotation about z, as :meth:`planner.manifold.ContactManifold._planar_axes` asks): its
+    base angle, first joint's position, link vectors (joint to joint, the last to the tip) and
+    axis signs; else None."""
+    if not isinstance(chain, SerialChain):
+        return None
+    R = chain.base_R
+    if (np.any(chain.axes[:, :2] != 0.0) or not np.all(np.abs(chain.axes[:, 2]) == 1.0)
+            or R[2, 2] != 1.0 or np.any(R[2, :2] != 0.0) or np.any(R[:2, 2] != 0.0)
+            or chain.base_p[2] != 0.0 or np.any(chain.origins[:, 2] != 0.0) or chain.tip[2] != 0.0):
+        return None
+    p0 = chain.base_p + R @ chain.origins[0]  # (3,)
+    links = [(float(o[0]), float(o[1])) for o in (*chain.origins[1:], chain.tip)]
+    return (float(np.arctan2(R[1, 0], R[0, 0])), float(p0[0]), float(p0[1]), links,
+            [float(a) for a in chain.axes[:, 2]])
+
+
+@dataclass(frozen=True)
+class _PlanarFinger:
+    """Static data of a planar capsule finger for :meth:`CollisionModel._planar_min` (plain floats)."""
+
+    chain: tuple[float, float, float, list[tuple[float, float]], list[float]]  # see _planar_points
+    others: list[int]  # the fingers checked against this one, in _FingerData.stacked order
+    other_chains: list[tuple[float, float, float, list[tuple[float, float]], list[float]]]  # theirs
+    r_infl: list[float]  # (n,)
+    r_true: list[float]  # (n,)
+    fixed_checked: list[bool]  # (n,)
+    base: tuple[float, float]  # the base joint's position (as _FingerData.base)
+    #: (i, j, pair_radii, pair_half) of every pair of _FingerData.pairs, in its order
+    pairs: list[tuple[int, int, float, float]]
+    #: the fixed bodies: ("segment", p0x, p0y, p1x, p1y) or ("disk", radius) (about the origin)
+    fixed: list[tuple[Any, ...]]
+    object_radius: float  # the disk object's radius
 
 
 @dataclass(frozen=True)
@@ -562,6 +668,10 @@ class CollisionModel:
                 qq[sl] = X[k]
                 out[k] = self.finger_clearance(finger, qq, position, rotation, touching, allowance)
             return out
+        pf = self._planar(finger) if N <= PLANAR_ROWS else None
+        if pf is not None:  # a few configurations of a planar capsule finger: in float arithmetic
+            return np.array(self._planar_rows(pf, finger, q, X.tolist(), position, allowance, touching, floor,
+                                              exact_below), dtype=float).reshape(N)
         n = len(fd.refs)
         d = self.scene.dim
         A, B = self._segment_arrays_many(finger, X)  # (N, n, d) each
@@ -805,6 +915,167 @@ class CollisionModel:
         A[:, 1:] = B[:, :-1]
         return A[:, :, :d], B[:, :, :d]
 
+
+    def _planar(self, finger: int) -> _PlanarFinger | None:
+        """The float data of ``finger`` when its clearance can be evaluated in float arithmetic
+        (:meth:`_planar_min`): a planar scene whose fingers are all serial chains turning about z
+        in the plane (capsules, no URDF shapes), a disk object and fixed bodies that are segments
+        or disks; else None (cached)."""
+        key = ("planar", finger)
+        if key in self._cache:
+            got: _PlanarFinger | None = self._cache[key]
+            return got
+        got = None
+        fd = self._finger_data(finger)
+        scene, hand = self.scene, self.hand
+        chains = [_planar_chain(f) for f in hand.fingers] if scene.dim == 2 else [None]
+        if (isinstance(scene.object.shape, Disk) and not fd.urdf and not fd.coal_object
+                and all(isinstance(fb.shape, Disk | Segment) for fb in scene.fixed_bodies)
+                and not any(self.is_urdf(k) for k in range(len(hand.fingers)))
+                and all(c is not None for c in chains)):
+            n = len(fd.refs)
+            others = [k for k in range(len(hand.fingers))
+                      if k != finger and (min(k, finger), max(k, finger)) in self.finger_pairs]
+            fixed: list[tuple[Any, ...]] = []
+            for fb in scene.fixed_bodies:
+                if isinstance(fb.shape, Segment):
+                    (p0x, p0y), (p1x, p1y) = ((float(v[0]), float(v[1])) for v in fb.shape.points)
+                    fixed.append(("segment", p0x, p0y, p1x, p1y))
+                elif isinstance(fb.shape, Disk):
+                    fixed.append(("disk", float(fb.shape.radius)))
+            ch = [c for c in chains if c is not None]  # every finger's (checked above)
+            got = _PlanarFinger(
+                ch[finger],
+                others,
+                [ch[k] for k in others],
+                [float(v) for v in fd.r_infl],
+                [float(v) for v in fd.r_true],
+                [bool(v) for v in fd.fixed_checked],
+                (float(fd.base[0]), float(fd.base[1])),
+                [(int(i), int(j), float(r), float(h)) for (i, j), r, h in
+                 zip(fd.pairs.reshape(-1, 2), fd.pair_radii, fd.pair_half, strict=True)],
+                fixed,
+                float(scene.object.shape.radius),
+            )
+            assert n == len(got.chain[3])
+        self._cache[key] = got
+        return got
+
+    def _planar_points_cached(self, finger: int, chain: tuple[float, float, float, list[tuple[float, float]],
+                                                             list[float]], q: Array) -> list[tuple[float, float]]:
+        """:func:`_planar_points` of a finger (its ``chain``) that does not move (cached by its joint values)."""
+        sl = self.hand.finger_slice(finger)
+        qf = np.asarray(q, dtype=float)[sl]
+        key = ("pts", finger, qf.tobytes())
+        got = self._cache.get(key)
+        if got is None:
+            if len(self._cache) > 4096:
+                for k in [k for k in self._cache if k[0] == "pts"]:
+                    del self._cache[k]
+            got = self._cache[key] = _planar_points(chain, qf.tolist())
+        return got
+
+    def _planar_min(
+        self,
+        pf: _PlanarFinger,
+        qf: Sequence[float],
+        others: list[list[tuple[float, float]]],
+        ox: float,
+        oy: float,
+        touch: Sequence[bool],
+        al: Sequence[float] | None,
+        floor: float | None = None,
+        exact_below: bool = False,
+    ) -> float:
+        """``min(clearance_terms - allowance)`` of a planar capsule finger (:meth:`_planar`) at its
+        joint values ``qf`` ``(n,)`` in float arithmetic, the disk object centred at ``(ox, oy)``,
+        ``others`` the joint points (:func:`_planar_points`) of the fingers checked against it:
+        the object terms, the link pairs and the fixed bodies with the formulas of
+        :meth:`clearance_terms` (the disk's distance about its centre, so without the object's
+        rotation; equal to them to round-off). A pair is evaluated only where its lower bound
+        ``|c_a - c_b| - (L_a + L_b) / 2`` (as :meth:`_clearances_min`) is below the minimum so far,
+        so the value is the exact minimum. ``floor`` as :meth:`_clearances_min`: without
+        ``exact_below`` only the side of ``floor`` is kept (it ends once below), with it the value
+        is exact below ``floor``."""
+        pts = _planar_points(pf.chain, qf)
+        n = len(pts) - 1
+        segs = [(pts[k][0], pts[k][1], pts[k + 1][0], pts[k + 1][1]) for k in range(n)]
+        r_o = pf.object_radius
+        best = math.inf
+        for k, (ax, ay, bx, by) in enumerate(segs):
+            od = _segment_distance_f(ax, ay, bx, by, ox, oy) - r_o
+            term = max(0.0, od - pf.r_true[k] + 1e-9) if touch[k] else od - pf.r_infl[k]
+            if al is not None:
+                term = term - al[k]
+            best = min(best, term)
+        if floor is not None and not exact_below and best < floor:
+            return best
+        for o in others:
+            segs += [(o[k][0], o[k][1], o[k + 1][0], o[k + 1][1]) for k in range(len(o) - 1)]
+        for p, (i, j, rad, half) in enumerate(pf.pairs):
+            a0x, a0y, a1x, a1y = segs[i]
+            b0x, b0y, b1x, b1y = segs[j]
+            a_p = al[2 * n + p] if al is not None else 0.0
+            gx, gy = 0.5 * (a0x + a1x) - 0.5 * (b0x + b1x), 0.5 * (a0y + a1y) - 0.5 * (b0y + b1y)
+            cut = best if floor is None else (min(best, floor) if exact_below else floor)
+            if math.sqrt(gx * gx + gy * gy) - half - rad - a_p - 1e-9 >= cut:
+                continue  # the pair's term is at least its bound, not below the cut
+            best = min(best, _segment_segment_distance_f(a0x, a0y, a1x, a1y, b0x, b0y, b1x, b1y) - rad - a_p)
+            if floor is not None and not exact_below and best < floor:
+                return best
+        if pf.fixed:
+            bx0, by0 = pf.base
+            for k, (ax, ay, bx, by) in enumerate(segs[:n]):
+                if not pf.fixed_checked[k]:
+                    continue
+                dx, dy = bx - ax, by - ay
+                if (ax - bx0) * (ax - bx0) + (ay - by0) * (ay - by0) < 1e-18:  # at the base: trimmed
+                    L = math.sqrt(dx * dx + dy * dy)
+                    trim = max(3.0 * pf.r_infl[k], BASE_TRIM * L)
+                    if 2.0 * trim >= L:
+                        continue
+                    f = trim / (L if L > 0 else 1.0)
+                    ax, ay = ax + dx * f, ay + dy * f
+                dist = math.inf
+                for fb in pf.fixed:
+                    if fb[0] == "segment":
+                        dist = min(dist, _segment_segment_distance_f(ax, ay, bx, by, fb[1], fb[2], fb[3], fb[4]))
+                    else:
+                        dist = min(dist, _segment_distance_f(ax, ay, bx, by, 0.0, 0.0) - fb[1])
+                term = dist - pf.r_infl[k]
+                if al is not None:
+                    term = term - al[n + k]
+                best = min(best, term)
+        return best
+
+    def _planar_rows(
+        self,
+        pf: _PlanarFinger,
+        finger: int,
+        q: Array,
+        rows: list[list[float]],
+        position: Array,
+        allowance: Array | None,
+        touching: Sequence[BodyRef],
+        floor: float | Array | None = None,
+        exact_below: bool = False,
+    ) -> list[float]:
+        """:meth:`_planar_min` at the finger's joint values ``rows`` ``(N, n)``, every other joint
+        as in ``q`` and the object at ``position``; ``floor`` a number or one per row."""
+        n = len(pf.r_infl)
+        touch = [False] * n
+        for t in touching:
+            if t.finger == finger and t.link is not None:
+                touch[min(int(t.link), n - 1)] = True
+        others = [self._planar_points_cached(k, c, q) for k, c in zip(pf.others, pf.other_chains, strict=True)]
+        al = None if allowance is None else np.asarray(allowance, dtype=float).tolist()
+        ox, oy = float(position[0]), float(position[1])
+        if floor is None or isinstance(floor, float | int):
+            fl = None if floor is None else float(floor)
+            return [self._planar_min(pf, x, others, ox, oy, touch, al, fl, exact_below) for x in rows]
+        fls = np.broadcast_to(np.asarray(floor, dtype=float), (len(rows),)).tolist()
+        return [self._planar_min(pf, x, others, ox, oy, touch, al, fls[k], exact_below) for k, x in enumerate(rows)]
+
     def _capsule_clearance_min(
         self,
         fd: _FingerData,
@@ -824,6 +1095,10 @@ class CollisionModel:
         sampled box distances are never below the exact ones). ``floor`` (:meth:`is_clear`): a value
         on the same side of ``floor`` as the minimum only (blocks culled against ``floor``, none once
         below it)."""
+        pf = self._planar(finger)
+        if pf is not None:  # a planar capsule finger: in float arithmetic
+            row = np.asarray(q, dtype=float)[self.hand.finger_slice(finger)].tolist()
+            return self._planar_rows(pf, finger, q, [row], position, allowance, touching, floor)[0]
         n = len(fd.refs)
         d = self.scene.dim
         A, B = self.segment_arrays(finger, q)  # (n, d), (n, d)

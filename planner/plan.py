@@ -29,6 +29,7 @@ from analysis._types import Array
 from analysis.exceptions import SceneError
 from analysis.geometry import object_size, shape_signed_distance
 from analysis.kinematics import HandKinematics
+from analysis.memo import scope as analysis_memo
 from analysis.pose import Pose
 from analysis.scene import Scene
 from planner.goals import Goal, check_combination, goal_heuristic, goal_reached
@@ -364,8 +365,16 @@ def plan(
 
     ``progress(fraction, message)`` is called after every node expansion (fraction of the
     expansion budget, or of ``time_limit`` when that is larger) and at the end with 1.0.
-    ``time_limit`` (seconds) bounds the search; reaching it gives ``found = False``.
+    ``time_limit`` (seconds) bounds the search; reaching it gives ``found = False``. The states
+    of one search pose many of the same LPs and statics again; each is computed once
+    (:mod:`analysis.memo`).
     """
+    with analysis_memo():
+        return _plan(scene, goal, progress, time_limit, max_expansions, options)
+
+
+def _plan(scene: Scene, goal: Goal, progress: Progress | None, time_limit: float | None, max_expansions: int,
+          options: PlannerOptions | None) -> Plan:
     check_goal(scene, goal)
     if time_limit is not None and not time_limit > 0:
         raise SceneError(("time_limit",), "must be positive")

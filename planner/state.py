@@ -73,6 +73,12 @@ class GraspState:
 
     def key(self) -> tuple[Any, ...]:
         """Identity of the node: the contact set (body and object-frame point) and the pose."""
+        return self._key
+
+    @cached_property
+    def _key(self) -> tuple[Any, ...]:
+        """:meth:`key`, computed once (the search asks for it about seven times per state; it reads
+        the contacts and the pose, which a state never changes, as :attr:`pose` assumes)."""
         return (
             tuple(sorted(c.key() for c in self.contacts)),
             tuple(np.round(self.pose_vector(), KEY_DECIMALS).tolist()),

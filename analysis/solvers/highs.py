@@ -14,6 +14,11 @@ LPs re-solves warm from the previous basis:
 An optimal :class:`LPResult` carries the multipliers (row duals, reduced costs) and reports its
 own residuals: primal (equality, inequality, bound violation), dual (stationarity) and the
 duality gap.
+
+Within :func:`analysis.memo.scope` (the planner opens one per plan) a one-shot LP
+(:func:`solve_lp`) whose data, options and method equal, bit for bit, those of an LP already
+solved in the scope is not solved again: its result is returned (its arrays read-only). A fresh
+HiGHS instance is deterministic, so this is the result the solve would give.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import numpy as np
 from highspy._core import _Highs
 from numpy.typing import NDArray
 
+from analysis import memo
 from analysis._types import Array
 from analysis.exceptions import SolverError, SolverTimeLimit
 
@@ -417,11 +423,27 @@ def solve_lp(
     ub: Array | float | None = None,
     maximize: bool = False,
     time_limit: float | None = None,
+    feasibility: float = FEAS_TOL,
+    method: Literal["warm", "defaults", "ipm"] = "warm",
 ) -> LPResult:
-    """One-shot LP (see :class:`LPModel`)."""
+    """One-shot LP (see :class:`LPModel`; ``method``: its settings, or after
+    :meth:`LPModel.use_defaults` or :meth:`LPModel.use_ipm`). Inside :func:`analysis.memo.scope`
+    an LP with the same data, options and method as one solved before returns that result."""
     c = np.asarray(c, dtype=float).ravel()
-    model = LPModel(len(c), A_ub, b_ub, A_eq, b_eq, lb, ub, time_limit)
-    return model.solve(c, maximize=maximize)
+
+    def solve() -> LPResult:
+        model = LPModel(len(c), A_ub, b_ub, A_eq, b_eq, lb, ub, time_limit, feasibility)
+        if method == "defaults":
+            model.use_defaults()
+        elif method == "ipm":
+            model.use_ipm()
+        return model.solve(c, maximize=maximize)
+
+    if not memo.active():
+        return solve()
+    key = ("solve_lp", memo.exact_key(c, A_ub, b_ub, A_eq, b_eq, lb, ub), bool(maximize), time_limit,
+           float(feasibility), method)
+    return memo.remembered(key, solve, lambda r: (r.x, r.y_ub, r.y_eq, r.z))
 
 
 class RowBoundLP:

@@ -303,3 +303,54 @@ def test_set_bounds_then_cold_solve_equals_a_new_model():
         np.testing.assert_allclose(again.x, fresh.x, rtol=0.0, atol=1e-13)
         assert again.problem is not None and np.array_equal(again.problem.ub, fresh.problem.ub)  # type: ignore[union-attr]
         assert np.all(again.x[:3] <= lim) and np.all(again.x[3:] >= 0.0)
+
+
+def test_lp_memo_solves_each_distinct_lp_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Inside ``analysis.memo.scope`` an LP with the same data, options and method returns the first result
+    (one HiGHS model built), equal bit for bit to a fresh solve outside the block; an LP differing
+    in one entry, the sense, the tolerance or the method is solved anew; the shared arrays are
+    read-only; nested blocks share one memo, and a new block starts empty."""
+    import analysis.solvers.highs as highs
+    from analysis import memo
+
+    built = {"n": 0}
+    orig_init = highs.LPModel.__init__
+
+    def counting_init(self: LPModel, *a: object, **k: object) -> None:
+        built["n"] += 1
+        orig_init(self, *a, **k)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(highs.LPModel, "__init__", counting_init)
+    rng = np.random.default_rng(12)
+    n, m = 6, 9
+    A = rng.normal(size=(m, n))
+    b = A @ rng.uniform(0.1, 1.0, n) + rng.uniform(0.1, 1.0, m)  # feasible at a positive point
+    c = rng.normal(size=n)
+    args = {"A_ub": A, "b_ub": b, "A_eq": A[:1], "b_eq": A[:1] @ np.full(n, 0.5), "lb": 0.0, "ub": 2.0}
+    fresh = solve_lp(c, **args)  # type: ignore[arg-type]
+    assert fresh.status == "optimal" and built["n"] == 1
+    with memo.scope():
+        first = solve_lp(c, **args)  # type: ignore[arg-type]
+        again = solve_lp(c.copy(), **{k: np.array(v, dtype=float) for k, v in args.items()})  # type: ignore[arg-type]
+        assert again is first and built["n"] == 2
+        assert first.x is not None and fresh.x is not None
+        np.testing.assert_array_equal(first.x, fresh.x)
+        np.testing.assert_array_equal(first.y_ub, fresh.y_ub)  # type: ignore[arg-type]
+        assert first.objective == fresh.objective
+        with pytest.raises(ValueError):
+            first.x[0] = 1.0  # shared: read-only
+        A2 = A.copy()
+        A2[3, 2] += 1e-12
+        others = [solve_lp(c, **{**args, "A_ub": A2}),  # type: ignore[arg-type]
+                  solve_lp(c, **args, maximize=True),  # type: ignore[arg-type]
+                  solve_lp(c, **args, feasibility=1e-9),  # type: ignore[arg-type]
+                  solve_lp(c, **args, method="defaults")]  # type: ignore[arg-type]
+        assert built["n"] == 6 and all(o is not first for o in others)
+        with memo.scope():  # nested: the outer block's results
+            assert solve_lp(c, **args) is first  # type: ignore[arg-type]
+        assert built["n"] == 6
+        np.testing.assert_allclose(others[3].x, fresh.x, atol=1e-8)  # type: ignore[arg-type]  # the same optimum
+    with memo.scope():
+        assert solve_lp(c, **args) is not first  # type: ignore[arg-type]
+    assert solve_lp(c, **args) is not first  # type: ignore[arg-type]
+    assert built["n"] == 8

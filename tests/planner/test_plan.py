@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+import importlib
 import json
 from dataclasses import replace
 
@@ -53,6 +55,39 @@ def test_plan_json(planar_plan, tmp_path) -> None:  # type: ignore[no-untyped-de
     motion = next(s for s in data["steps"] if s["kind"] == "object_motion")
     assert motion["torques"]["chosen"] is not None and motion["torques"]["set"]["work"] > 0
     assert data["stats"]["nodes_expanded"] >= 1
+
+
+def test_the_analysis_memo_leaves_the_plan_unchanged(planar_scene: Scene, planar_plan,  # type: ignore[no-untyped-def]
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """``plan`` solves each distinct LP of its states, and computes each distinct statics and motion
+    space, once (``analysis.memo``): planned with everything afresh, the planar plan's JSON is the
+    same but for the timings, and the memo did save LP models (the states pose the same LPs again)."""
+    import analysis.solvers.highs as highs
+
+    plan_mod = importlib.import_module("planner.plan")  # (the package's `plan` is the function)
+
+    built = {"n": 0}
+    orig_init = highs.LPModel.__init__
+
+    def counting_init(self: highs.LPModel, *a: object, **k: object) -> None:
+        built["n"] += 1
+        orig_init(self, *a, **k)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(highs.LPModel, "__init__", counting_init)
+    memo = plan(planar_scene, Goal(type="active"))
+    with_memo, built["n"] = built["n"], 0
+    monkeypatch.setattr(plan_mod, "analysis_memo", contextlib.nullcontext)
+    fresh = plan(planar_scene, Goal(type="active"))
+    assert with_memo < built["n"]
+
+    def strip(p: object) -> object:
+        data = p.to_json()  # type: ignore[attr-defined]
+        data.pop("stats")
+        for s in data["steps"]:
+            s.get("figures", {}).pop("ompl_seconds", None)
+        return data
+
+    assert strip(memo) == strip(fresh) == strip(planar_plan)
 
 
 def test_no_path_is_a_result_naming_the_block(planar_scene: Scene) -> None:
