@@ -37,7 +37,7 @@ from analysis.exceptions import SolverError
 from analysis.friction import FrictionSet, kinetic_friction
 from analysis.linalg import rank
 from analysis.motion import NULL_ROW_TOL, MotionSpace
-from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, WORK_TOL, snap
+from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, WORK_TOL, WORK_ZERO, snap
 from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators
 from analysis.solvers.highs import LPModel, LPResult
 from analysis.statics import Statics
@@ -156,6 +156,26 @@ class _RhsBases:
                 self.hits += 1
                 return x
         return None
+
+    def solve_many(self, b: Array) -> tuple[Array, Array]:
+        """:meth:`solve` for the right-hand sides ``b`` ``(k, m)``: the optima ``(k, n)`` and which
+        rows have one ``(k,)`` (a row takes the first kept basis whose point satisfies every row;
+        the optimum is unique, so it does not matter which)."""
+        k = b.shape[0]
+        bbar = np.hstack([b, np.broadcast_to(self.fixed, (k, len(self.fixed)))])  # (k, m + #lb + #ub)
+        tol = BASIS_PRIMAL_TOL * np.maximum(1.0, np.abs(bbar).max(axis=1, initial=0.0))  # (k,)
+        X = np.zeros((k, self.Abar.shape[1]))
+        found = np.zeros(k, bool)
+        for rows, inv in self.bases:
+            todo = np.flatnonzero(~found)
+            if not todo.size:
+                break
+            x = bbar[todo][:, rows] @ inv.T  # (t, n)
+            ok = (x @ self.Abar.T <= bbar[todo] + tol[todo, None]).all(axis=1)
+            X[todo[ok]] = x[ok]
+            found[todo[ok]] = True
+        self.hits += int(found.sum())
+        return X, found
 
     def harvest(self, res: LPResult) -> None:
         """Keep the basis of the optimal result ``res`` when its multipliers certify it (above)."""
@@ -745,11 +765,14 @@ class DAFCOracle:
         live: list[int] = []
         rows_u: list[Array] = []
         rows_dr: list[Array] = []
+        DR0 = U @ LrT  # (n, D): only to find the directions outside the motion space (a 1e-6 test)
+        res = DR0 @ Lr @ LrT - DR0  # (n, D)
+        outside = np.sqrt((res * res).sum(axis=1)) > 0.5e-6 * np.maximum(1.0, np.sqrt((DR0 * DR0).sum(axis=1)))
         for k, u0 in enumerate(U):
             dr0 = Lr @ u0  # (D,)
             u1 = LrT @ dr0  # (a_bar,)
             nu = _norm(u1)
-            if nu < 1e-12 or _norm(Lr @ u1 - dr0) > 1e-6 * max(1.0, _norm(dr0)):
+            if nu < 1e-12 or (outside[k] and _norm(Lr @ u1 - dr0) > 1e-6 * max(1.0, _norm(dr0))):
                 out[k] = DirectionTest(dr0, u1, None, False, np.nan, "direction is outside the motion space", True)
                 continue
             u = u1 / nu
@@ -774,10 +797,29 @@ class DAFCOracle:
         # the least-L1 redundancy (redundancy_for): zero where that is allowable, else its LP
         Z = np.zeros((len(idx), ms.n_redundant))  # (k, r)
         if self.B.shape[0]:
-            tol_a = ALLOW_TOL * np.maximum(1.0, np.sqrt((Uu * Uu).sum(axis=1)))  # (k,)
-            need = is_open & ~(Uu @ self._B_u.T <= tol_a[:, None]).all(axis=1)
-            for r in np.flatnonzero(need):
-                z = self.redundancy_for(Uu[r])
+            size_u = np.maximum(1.0, np.sqrt((Uu * Uu).sum(axis=1)))  # (k,) max(1, |u|)
+            tol_a = ALLOW_TOL * size_u  # (k,)
+            need = np.flatnonzero(is_open & ~(Uu @ self._B_u.T <= tol_a[:, None]).all(axis=1))
+            none = np.zeros(len(need), bool)  # no redundancy makes the motion allowable
+            known = np.zeros(len(need), bool)
+            nr = ms.n_redundant
+            if nr == 0 or not self._B_r_any:
+                none[:] = True
+            elif need.size:
+                b = -(Uu[need] @ self._B_u.T) + tol_a[need, None] / 2  # (k_n, #D) as redundancy_for's LP
+                if self._farkas.shape[0]:
+                    none = (b @ self._farkas.T).min(axis=1) < -FARKAS_MARGIN * size_u[need]
+                if self._redundancy_bases is not None and not none.all():
+                    X, known = self._redundancy_bases.solve_many(b)
+                    known &= ~none
+                    Z[need[known]] = X[known, :nr] - X[known, nr:]
+            for q, r in enumerate(need):
+                if none[q]:
+                    z = None
+                elif known[q]:
+                    continue
+                else:
+                    z = self.redundancy_for(Uu[r])  # its LP (or a certificate harvested since)
                 if z is None:
                     out[idx[r]] = DirectionTest(DR[r], Uu[r], None, False, np.nan,
                                                 "not allowable: a D-point would penetrate", True)
@@ -868,10 +910,11 @@ class DAFCOracle:
         sc = self.system.scales
         if np.isnan(sup):
             return DirectionTest(dr, u, zc, False, np.nan, "degenerate: the force LP is numerically undecided", False)
-        work_tol = sc.work_tol(dr)
+        size = sc.motion_size(dr)
+        work_tol = WORK_TOL * sc.force * size  # sc.work_tol(dr), the same product
         if sup > work_tol:
             return DirectionTest(dr, u, zc, True, sup, "member", self.exact, f)
-        why = ("the fingers cannot do positive work" if sup <= sc.work_zero(dr) else
+        why = ("the fingers cannot do positive work" if sup <= WORK_ZERO * sc.force * size else
                "degenerate: the largest work is positive but below the tolerance "
                f"({sup:.3g} <= {work_tol:.3g})")
         return DirectionTest(dr, u, zc, False, sup, why, self.exact, f)
