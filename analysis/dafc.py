@@ -748,14 +748,15 @@ class DAFCOracle:
         certified vertices: :meth:`_vertex_sups`); where that does not decide, the LP of the first
         open direction is solved (as :meth:`test` would), which stores its vertex, and the open
         directions are tried again. Every shortcut gives the LP's own answer, so no answer depends
-        on the order in which the LPs were solved. Where the slips depend on the redundancy
-        (several candidate motions per direction), the directions that pass the screen are tested
-        one by one; so are all directions with S-points in 3-D (the force LP's rows depend on
-        the exact slips there)."""
+        on the order in which the LPs were solved. The directions are tested one by one where the
+        slips depend on the redundancy (several candidate motions per direction, each from its own
+        LPs: batching their first candidate, the friction-aligned one, from certified bases saved
+        nothing on the planar scene), with S-points in 3-D (the force LP's rows depend on the exact
+        slips there), and below :data:`BATCH_MIN` directions."""
         ms, sy, sel = self.ms, self.system, self.sel
         Lr = self._Lr  # (D, a_bar)
         U = np.asarray(U, dtype=float).reshape(-1, ms.a_bar)
-        if U.shape[0] < BATCH_MIN or ms.a_bar == 0 or (sel.s_index and self._d != 2):
+        if U.shape[0] < BATCH_MIN or ms.a_bar == 0 or self.slip_depends_on_redundancy or (sel.s_index and self._d != 2):
             return [self.test(Lr @ u, witness=False) for u in U]
         sc = sy.scales
         out: list[DirectionTest | None] = [None] * U.shape[0]
@@ -790,10 +791,6 @@ class DAFCOracle:
                 out[idx[r]] = DirectionTest(DR[r], Uu[r], None, False, np.nan,
                                             "the fingers cannot do positive work, whatever the S-points' slip", True)
             is_open &= positive
-        if self.slip_depends_on_redundancy:  # several candidate motions per direction
-            for r in np.flatnonzero(is_open):
-                out[idx[r]] = self.test(Lr @ U[idx[r]], witness=False)
-            return [t for t in out if t is not None]
         # the least-L1 redundancy (redundancy_for): zero where that is allowable, else its LP
         Z = np.zeros((len(idx), ms.n_redundant))  # (k, r)
         if self.B.shape[0]:
