@@ -858,6 +858,7 @@ class DAFCOracle:
                 continue
             C = DR[g_rows] @ G_eff  # (k_g, L_c) work per unit force
             pend = np.arange(len(g_rows))
+            solved = False
             while pend.size:
                 sup, j = self._vertex_sups(key, C[pend], DR[g_rows[pend]], sizes[g_rows[pend]])
                 cache = self._vertices.get(key)
@@ -866,12 +867,21 @@ class DAFCOracle:
                         r = g_rows[p]
                         f = cache.X[jj] * sc.force if jj >= 0 and cache is not None else None
                         out[idx[r]] = self._verdict(DR[r], Uu[r], ZC[r], float(s), f)
+                if solved and bool((j == -2).all()):
+                    # the last LP's vertex certified no other direction (as in 3-D, where the optima
+                    # rarely recur): the rest one by one, each with its own vertex check first
+                    for p in pend:
+                        r = g_rows[p]
+                        s, f = self._work_sup(DR[r], ZC[r], False, friction)
+                        out[idx[r]] = self._verdict(DR[r], Uu[r], ZC[r], s, f)
+                    break
                 pend = pend[j == -2]
                 if pend.size:  # the LP of the first open direction (it keeps its optimal vertex)
                     r = g_rows[pend[0]]
                     s, f = self._work_sup(DR[r], ZC[r], False, friction)
                     out[idx[r]] = self._verdict(DR[r], Uu[r], ZC[r], s, f)
                     pend = pend[1:]
+                    solved = True
         assert all(t is not None for t in out)
         return [t for t in out if t is not None]
 
@@ -884,6 +894,7 @@ class DAFCOracle:
         tol = WORK_TOL * sc.force * sizes  # (k,) work_tol
         positive = np.zeros(DR.shape[0], bool)
         pend = np.arange(DR.shape[0])
+        solved = False  # an LP was solved since the first pass
         while pend.size:
             D_p = DR[pend]  # (k', D)
             done = np.zeros(len(pend), bool)
@@ -896,10 +907,15 @@ class DAFCOracle:
             known = rest[j != -2]
             positive[pend[known]] = sup[j != -2] > tol[pend[known]]
             done[known] = True
+            if solved and not done.any():  # the last LP decided no other direction: one by one
+                for r in pend:
+                    positive[r] = self.relaxed_positive(DR[r])
+                break
             pend = pend[~done]
             if pend.size:
                 positive[pend[0]] = self.relaxed_positive(DR[pend[0]])
                 pend = pend[1:]
+                solved = True
         return positive
 
     def _verdict(self, dr: Array, u: Array, zc: Array, sup: float, f: Array | None) -> DirectionTest:
