@@ -37,7 +37,7 @@ from analysis.exceptions import SolverError
 from analysis.friction import FrictionSet, kinetic_friction
 from analysis.linalg import rank
 from analysis.motion import NULL_ROW_TOL, MotionSpace
-from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, WORK_TOL, snap
+from analysis.scales import FORCE_TOL, GRIP_BOUND, LP_FEAS_TOL, WORK_TOL, WORK_ZERO, snap
 from analysis.solvers.cdd import Generators, cone_generators, polyhedron_generators
 from analysis.solvers.highs import LPModel, LPResult
 from analysis.statics import Statics
@@ -66,6 +66,9 @@ VERTEX_DUAL_TOL = 1e-12
 #: The key of the relaxed LP's vertices among the force LP's (:meth:`DAFCOracle._vertex_sup`; the
 #: force LP's keys are empty or whole float64 arrays, never 1 byte long).
 _RELAXED_KEY = b"R"
+#: :meth:`DAFCOracle.test_many` tests fewer directions than this one by one (the steps done for
+#: all rows at once cost more than the per-direction work they save below about a dozen rows).
+BATCH_MIN = 12
 #: Optimal bases kept per redundancy LP (:class:`_RhsBases`), the least multiplier (relative to the
 #: objective) that makes a basis's optimum unique, and the primal slack (relative to the
 #: right-hand side) a reused basis point may have.
@@ -153,6 +156,26 @@ class _RhsBases:
                 self.hits += 1
                 return x
         return None
+
+    def solve_many(self, b: Array) -> tuple[Array, Array]:
+        """:meth:`solve` for the right-hand sides ``b`` ``(k, m)``: the optima ``(k, n)`` and which
+        rows have one ``(k,)`` (a row takes the first kept basis whose point satisfies every row;
+        the optimum is unique, so it does not matter which)."""
+        k = b.shape[0]
+        bbar = np.hstack([b, np.broadcast_to(self.fixed, (k, len(self.fixed)))])  # (k, m + #lb + #ub)
+        tol = BASIS_PRIMAL_TOL * np.maximum(1.0, np.abs(bbar).max(axis=1, initial=0.0))  # (k,)
+        X = np.zeros((k, self.Abar.shape[1]))
+        found = np.zeros(k, bool)
+        for rows, inv in self.bases:
+            todo = np.flatnonzero(~found)
+            if not todo.size:
+                break
+            x = bbar[todo][:, rows] @ inv.T  # (t, n)
+            ok = (x @ self.Abar.T <= bbar[todo] + tol[todo, None]).all(axis=1)
+            X[todo[ok]] = x[ok]
+            found[todo[ok]] = True
+        self.hits += int(found.sum())
+        return X, found
 
     def harvest(self, res: LPResult) -> None:
         """Keep the basis of the optimal result ``res`` when its multipliers certify it (above)."""
@@ -466,7 +489,10 @@ class DAFCOracle:
         ``+-t``: the force LP depends on the motion through these signs only, and one set of rows
         (with its certified vertices, :meth:`_vertex_sup`) serves every motion of a pattern."""
         sl = self.slips_of(zeta_c) if slips is None else slips  # (#S, 2)
-        sig = np.where((sl * self._T_s).sum(axis=1) >= 0.0, 1.0, -1.0)  # (#S,)
+        return self._pattern_friction(np.where((sl * self._T_s).sum(axis=1) >= 0.0, 1.0, -1.0))
+
+    def _pattern_friction(self, sig: Array) -> tuple[Array, Array, bytes]:
+        """:meth:`_planar_friction` of the slip-sign pattern ``sig`` ``(#S,)`` (+-1 along the tangents)."""
         key = sig.tobytes()
         known = self._pattern_G.get(key)
         if known is None:
@@ -538,6 +564,41 @@ class DAFCOracle:
             return None  # too close to the threshold (work_tol(dr)): the LP decides
         self.vertex_hits += 1
         return sup, f
+
+    def _vertex_sups(self, key: bytes, C: Array, DR: Array, sizes: Array) -> tuple[Array, Array]:
+        """:meth:`_vertex_sup` for many objectives at once: the rows of ``C`` ``(m, n)``, of the
+        directions ``DR`` ``(m, D)`` whose motion sizes are ``sizes`` ``(m,)``. Returns the suprema
+        ``(m,)`` and per row the index of the certified vertex (``-1``: the rows are infeasible,
+        supremum ``-inf``; ``-2``: not decided, the LP decides). The same checks, row by row."""
+        m = C.shape[0]
+        sup = np.full(m, np.nan)
+        idx = np.full(m, -2)
+        if m == 0 or key not in self._vertices:
+            return sup, idx
+        cache = self._vertices[key]
+        if cache is None:
+            self.vertex_hits += m
+            return np.full(m, -np.inf), np.full(m, -1)
+        sc = self.system.scales
+        scale = VERTEX_DUAL_TOL * np.maximum(1.0, np.abs(C).max(axis=1) if C.shape[1] else 0.0)  # (m,)
+        thr = WORK_TOL * sc.force * sizes  # (m,) work_tol of each direction
+        margin = RELAXED_MARGIN * sc.force * sizes  # (m,)
+        w0 = DR @ self.system.w_ex  # (m,)
+        best = (C @ cache.X.T).argmax(axis=1)  # (m,) only the vertex of largest c^T x can be optimal
+        for j in np.unique(best):
+            rows = np.flatnonzero(best == j)
+            M, AT, n_ub = cache.certs[int(j)]
+            Cj, sj = C[rows], scale[rows]  # (r, n), (r,)
+            Y = Cj @ M.T  # (r, k_act) multipliers of the active rows
+            ok = np.abs(Y @ AT.T - Cj).max(axis=1) <= sj
+            if n_ub:
+                ok &= Y[:, :n_ub].min(axis=1) >= -sj
+            s = Cj @ (cache.X[j] * sc.force) + w0[rows]  # (r,)
+            ok &= np.abs(s - thr[rows]) > margin[rows]  # not too close to the threshold
+            sup[rows[ok]] = s[ok]
+            idx[rows[ok]] = j
+        self.vertex_hits += int((idx >= 0).sum())
+        return sup, idx
 
     def certify(self, t: DirectionTest) -> bool:
         """Re-check a member in newtons: its forces lie in the friction set, satisfy the passive
@@ -677,6 +738,199 @@ class DAFCOracle:
             last = DirectionTest(dr, u, zc, False, sup, why, self.exact, f)
         assert last is not None
         return last
+
+    def test_many(self, U: Array) -> list[DirectionTest]:
+        """``[self.test(Lambda~_r @ u, witness=False) for u in U]`` for the unit coordinates ``U``
+        ``(n, a_bar)``, each step of :meth:`test` done for all directions at once.
+
+        The screen (:meth:`relaxed_positive`) and the force LP (:meth:`_work_sup`) are first
+        answered for every direction from what earlier LPs left (the relaxation's maximisers, the
+        certified vertices: :meth:`_vertex_sups`); where that does not decide, the LP of the first
+        open direction is solved (as :meth:`test` would), which stores its vertex, and the open
+        directions are tried again. Every shortcut gives the LP's own answer, so no answer depends
+        on the order in which the LPs were solved. The directions are tested one by one where the
+        slips depend on the redundancy (several candidate motions per direction, each from its own
+        LPs: batching their first candidate, the friction-aligned one, from certified bases saved
+        nothing on the planar scene), with S-points in 3-D (the force LP's rows depend on the exact
+        slips there), and below :data:`BATCH_MIN` directions."""
+        ms, sy, sel = self.ms, self.system, self.sel
+        Lr = self._Lr  # (D, a_bar)
+        U = np.asarray(U, dtype=float).reshape(-1, ms.a_bar)
+        if U.shape[0] < BATCH_MIN or ms.a_bar == 0 or self.slip_depends_on_redundancy or (sel.s_index and self._d != 2):
+            return [self.test(Lr @ u, witness=False) for u in U]
+        sc = sy.scales
+        out: list[DirectionTest | None] = [None] * U.shape[0]
+        # the direction and its coordinates row by row, as test() computes them (a matrix product
+        # rounds differently, and the refinement of dafc_set compares coordinates to 1e-12)
+        LrT = Lr.T  # (a_bar, D)
+        live: list[int] = []
+        rows_u: list[Array] = []
+        rows_dr: list[Array] = []
+        DR0 = U @ LrT  # (n, D): only to find the directions outside the motion space (a 1e-6 test)
+        res = DR0 @ Lr @ LrT - DR0  # (n, D)
+        outside = np.sqrt((res * res).sum(axis=1)) > 0.5e-6 * np.maximum(1.0, np.sqrt((DR0 * DR0).sum(axis=1)))
+        for k, u0 in enumerate(U):
+            dr0 = Lr @ u0  # (D,)
+            u1 = LrT @ dr0  # (a_bar,)
+            nu = _norm(u1)
+            if nu < 1e-12 or (outside[k] and _norm(Lr @ u1 - dr0) > 1e-6 * max(1.0, _norm(dr0))):
+                out[k] = DirectionTest(dr0, u1, None, False, np.nan, "direction is outside the motion space", True)
+                continue
+            u = u1 / nu
+            live.append(k)
+            rows_u.append(u)
+            rows_dr.append(Lr @ u)
+        idx = np.array(live, dtype=int)  # (k,) the rows still open, by their index in U
+        Uu = np.array(rows_u).reshape(-1, ms.a_bar)  # (k, a_bar)
+        DR = np.array(rows_dr).reshape(-1, ms.D)  # (k, D)
+        sizes = sc.motion_sizes(DR)  # (k,)
+        is_open = np.ones(len(idx), bool)
+        if sel.s_index:
+            positive = self._screen_many(DR, sizes)
+            for r in np.flatnonzero(~positive):
+                out[idx[r]] = DirectionTest(DR[r], Uu[r], None, False, np.nan,
+                                            "the fingers cannot do positive work, whatever the S-points' slip", True)
+            is_open &= positive
+        # the least-L1 redundancy (redundancy_for): zero where that is allowable, else its LP
+        Z = np.zeros((len(idx), ms.n_redundant))  # (k, r)
+        if self.B.shape[0]:
+            size_u = np.maximum(1.0, np.sqrt((Uu * Uu).sum(axis=1)))  # (k,) max(1, |u|)
+            tol_a = ALLOW_TOL * size_u  # (k,)
+            need = np.flatnonzero(is_open & ~(Uu @ self._B_u.T <= tol_a[:, None]).all(axis=1))
+            none = np.zeros(len(need), bool)  # no redundancy makes the motion allowable
+            known = np.zeros(len(need), bool)
+            nr = ms.n_redundant
+            if nr == 0 or not self._B_r_any:
+                none[:] = True
+            elif need.size:
+                b = -(Uu[need] @ self._B_u.T) + tol_a[need, None] / 2  # (k_n, #D) as redundancy_for's LP
+                if self._farkas.shape[0]:
+                    none = (b @ self._farkas.T).min(axis=1) < -FARKAS_MARGIN * size_u[need]
+                if self._redundancy_bases is not None and not none.all():
+                    X, known = self._redundancy_bases.solve_many(b)
+                    known &= ~none
+                    Z[need[known]] = X[known, :nr] - X[known, nr:]
+            for q, r in enumerate(need):
+                if none[q]:
+                    z = None
+                elif known[q]:
+                    continue
+                else:
+                    z = self.redundancy_for(Uu[r])  # its LP (or a certificate harvested since)
+                if z is None:
+                    out[idx[r]] = DirectionTest(DR[r], Uu[r], None, False, np.nan,
+                                                "not allowable: a D-point would penetrate", True)
+                    is_open[r] = False
+                else:
+                    Z[r] = z
+        ZC = np.hstack([Uu, Z])  # (k, a) the motion tested
+        nzc = np.sqrt((ZC * ZC).sum(axis=1))  # (k,)
+        if self.B.shape[0]:
+            bz = ZC @ self.B.T  # (k, #D) the D-points' normal velocities
+            pen = is_open & (bz > (ALLOW_TOL * np.maximum(1.0, nzc))[:, None]).any(axis=1)
+            for r in np.flatnonzero(pen):
+                out[idx[r]] = DirectionTest(DR[r], Uu[r], ZC[r], False, np.nan,
+                                            "not allowable: a D-point would penetrate", self.exact)
+            is_open &= ~pen
+        rows = np.flatnonzero(is_open)
+        groups: list[tuple[Array, tuple[Array, Array, bytes] | None]] = []  # (rows, the pattern's friction)
+        if sel.s_index:
+            nS = len(sel.s_index)
+            SL = (ZC[rows] @ self.Ps.T).reshape(len(rows), nS, self._d)  # (k', #S, 2) slips
+            small = np.sqrt((SL * SL).sum(axis=2)) <= SLIP_TOL * nzc[rows, None]  # (k', #S)
+            still = small.any(axis=1)
+            for r, q in zip(rows[still], small[still].argmax(axis=1), strict=True):
+                out[idx[r]] = DirectionTest(DR[r], Uu[r], ZC[r], False, np.nan,
+                                            f"S-point {sel.s_index[int(q)]} does not slide for this motion", self.exact)
+            rows, SL = rows[~still], SL[~still]
+            SIG = np.where((SL * self._T_s[None]).sum(axis=2) >= 0.0, 1.0, -1.0)  # (k'', #S) sign patterns
+            pats, inv = np.unique(SIG, axis=0, return_inverse=True)
+            for q, sig in enumerate(pats):
+                groups.append((rows[inv.reshape(-1) == q], self._pattern_friction(np.ascontiguousarray(sig))))
+        elif rows.size:
+            groups.append((rows, None))
+        for g_rows, friction in groups:
+            G_eff = self.st.G_c if friction is None else friction[0]  # (D, L_c)
+            key = b"" if friction is None else friction[2]
+            if G_eff.shape[1] == 0:  # no contact carries force: only w_ex can do work
+                for r in g_rows:
+                    out[idx[r]] = self._verdict(DR[r], Uu[r], ZC[r], float(DR[r] @ sy.w_ex), np.zeros(0))
+                continue
+            C = DR[g_rows] @ G_eff  # (k_g, L_c) work per unit force
+            pend = np.arange(len(g_rows))
+            solved = False
+            while pend.size:
+                sup, j = self._vertex_sups(key, C[pend], DR[g_rows[pend]], sizes[g_rows[pend]])
+                cache = self._vertices.get(key)
+                for p, s, jj in zip(pend, sup, j, strict=True):
+                    if jj != -2:
+                        r = g_rows[p]
+                        f = cache.X[jj] * sc.force if jj >= 0 and cache is not None else None
+                        out[idx[r]] = self._verdict(DR[r], Uu[r], ZC[r], float(s), f)
+                if solved and bool((j == -2).all()):
+                    # the last LP's vertex certified no other direction (as in 3-D, where the optima
+                    # rarely recur): the rest one by one, each with its own vertex check first
+                    for p in pend:
+                        r = g_rows[p]
+                        s, f = self._work_sup(DR[r], ZC[r], False, friction)
+                        out[idx[r]] = self._verdict(DR[r], Uu[r], ZC[r], s, f)
+                    break
+                pend = pend[j == -2]
+                if pend.size:  # the LP of the first open direction (it keeps its optimal vertex)
+                    r = g_rows[pend[0]]
+                    s, f = self._work_sup(DR[r], ZC[r], False, friction)
+                    out[idx[r]] = self._verdict(DR[r], Uu[r], ZC[r], s, f)
+                    pend = pend[1:]
+                    solved = True
+        assert all(t is not None for t in out)
+        return [t for t in out if t is not None]
+
+    def _screen_many(self, DR: Array, sizes: Array) -> Array:
+        """:meth:`relaxed_positive` of each row of ``DR`` ``(k, D)`` (motion sizes ``sizes``):
+        ``(k,)`` bool. The stored maximisers and certified vertices answer at once; the relaxed LP
+        of the first open row adds a maximiser and a vertex, and the others are tried again."""
+        sy = self.system
+        sc = sy.scales
+        tol = WORK_TOL * sc.force * sizes  # (k,) work_tol
+        positive = np.zeros(DR.shape[0], bool)
+        pend = np.arange(DR.shape[0])
+        solved = False  # an LP was solved since the first pass
+        while pend.size:
+            D_p = DR[pend]  # (k', D)
+            done = np.zeros(len(pend), bool)
+            if self._relaxed_W.shape[1]:
+                lower = (D_p @ self._relaxed_W).max(axis=1) * sc.force + D_p @ sy.w_ex  # (k',)
+                done = lower > tol[pend] + RELAXED_MARGIN * sc.force * sizes[pend]
+                positive[pend[done]] = True
+            rest = np.flatnonzero(~done)
+            sup, j = self._vertex_sups(_RELAXED_KEY, D_p[rest] @ self._G_relaxed, D_p[rest], sizes[pend[rest]])
+            known = rest[j != -2]
+            positive[pend[known]] = sup[j != -2] > tol[pend[known]]
+            done[known] = True
+            if solved and not done.any():  # the last LP decided no other direction: one by one
+                for r in pend:
+                    positive[r] = self.relaxed_positive(DR[r])
+                break
+            pend = pend[~done]
+            if pend.size:
+                positive[pend[0]] = self.relaxed_positive(DR[pend[0]])
+                pend = pend[1:]
+                solved = True
+        return positive
+
+    def _verdict(self, dr: Array, u: Array, zc: Array, sup: float, f: Array | None) -> DirectionTest:
+        """:meth:`test`'s answer for the motion ``zc`` whose force LP gave the supremum ``sup``."""
+        sc = self.system.scales
+        if np.isnan(sup):
+            return DirectionTest(dr, u, zc, False, np.nan, "degenerate: the force LP is numerically undecided", False)
+        size = sc.motion_size(dr)
+        work_tol = WORK_TOL * sc.force * size  # sc.work_tol(dr), the same product
+        if sup > work_tol:
+            return DirectionTest(dr, u, zc, True, sup, "member", self.exact, f)
+        why = ("the fingers cannot do positive work" if sup <= WORK_ZERO * sc.force * size else
+               "degenerate: the largest work is positive but below the tolerance "
+               f"({sup:.3g} <= {work_tol:.3g})")
+        return DirectionTest(dr, u, zc, False, sup, why, self.exact, f)
 
     def _aligned_allowable(self, u: Array, base: Array, Pr: Array, target: Array, scale: float) -> Array | None:
         """The allowable redundancy whose slips come closest (L1) to the friction-aligned ones
@@ -1713,6 +1967,18 @@ def _face_crossing(H: Array, inner: Array, outer: Array) -> Array | None:
     return None if nm < 1e-12 or t <= 0.0 or t >= 1.0 else m / nm
 
 
+def _face_step(arc: list[Array], in_a: bool, m: Array, t: DirectionTest, active: list[bool], q: int) -> None:
+    """:func:`dafc_set`'s refinement at the point ``m`` where the arc ``[a, b]`` of pair ``q``
+    leaves the allowable cone, tested as ``t``: a member there ends the pair (the boundary is the
+    face); otherwise ``m`` replaces the arc's non-allowable end, and the bisection goes on."""
+    if t.member:
+        active[q] = False
+    elif in_a:
+        arc[1] = m
+    else:
+        arc[0] = m
+
+
 def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int = 0) -> DAFCSet:
     """Sample the unit sphere of the motion space, test every direction, refine boundaries.
 
@@ -1731,11 +1997,10 @@ def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int 
     if a_bar == 0:
         return DAFCSet(np.zeros((0, ms.D)), np.zeros(0, bool), np.zeros(0), gen, 0, True)
     U = sample_directions(ms, samples, seed)
-    tests = [oracle.test(ms.Lambda_r_t @ u, witness=False) for u in U]
+    tests = oracle.test_many(U)
     member = np.array([t.member for t in tests])
     # boundary refinement
     if refine and member.any() and (~member).any() and a_bar >= 2:
-        new: list[DirectionTest] = []
         Ut = np.array([t.u for t in tests])
         pairs: list[tuple[int, int]] = []
         if a_bar == 2:
@@ -1747,9 +2012,20 @@ def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int 
                 jm = int(others[int(np.argmax(cos[km, others]))])
                 pairs.append((int(km), jm))
         faces = _allowable_faces(ms)
+        # each pair's arc (a, b), which end is the member, its new tests; the pairs are refined
+        # side by side, one step of all of them tested at once (test_many), their tests kept per pair
+        arcs: list[list[Array]] = []
+        ends: list[bool] = []
+        new: list[list[DirectionTest]] = []
+        active: list[bool] = []
+        crossing: list[tuple[int, Array]] = []  # (pair, the point where its arc leaves A_r)
         for k, j in pairs[:64]:
             a, b = Ut[k], Ut[j]
             in_a = bool(member[k])
+            arcs.append([a, b])
+            ends.append(in_a)
+            new.append([])
+            active.append(True)
             # a boundary on a face of the allowable cone is resolved exactly: one test where the
             # arc leaves the cone; the bisection is only needed when that point is not a member
             if faces is not None and tests[j if in_a else k].reason.startswith("not allowable"):
@@ -1758,28 +2034,30 @@ def dafc_set(oracle: DAFCOracle, samples: int = 200, refine: int = 6, seed: int 
                 if m is not None:
                     seen = np.flatnonzero(Ut @ m > 1 - 1e-12)  # (a_bar = 2: a generator of A_r, tested)
                     if seen.size:
-                        t = tests[int(seen[0])]
+                        _face_step(arcs[-1], in_a, m, tests[int(seen[0])], active, len(active) - 1)
                     else:
-                        t = oracle.test(ms.Lambda_r_t @ m, witness=False)
-                        new.append(t)
-                    if t.member:
-                        continue
-                    if in_a:
-                        b = m
-                    else:
-                        a = m
-            for _ in range(refine):
+                        crossing.append((len(arcs) - 1, m))
+        if crossing:
+            for (q, m), t in zip(crossing, oracle.test_many(np.array([m for _, m in crossing])), strict=True):
+                new[q].append(t)
+                _face_step(arcs[q], ends[q], m, t, active, q)
+        for _ in range(refine):
+            step: list[tuple[int, Array]] = []
+            for q, (a, b) in enumerate(arcs):
+                if not active[q]:
+                    continue
                 m = a + b
                 if np.linalg.norm(m) < 1e-12:
-                    break
-                m /= np.linalg.norm(m)
-                t = oracle.test(ms.Lambda_r_t @ m, witness=False)
-                new.append(t)
-                if t.member == in_a:
-                    a = m
-                else:
-                    b = m
-        tests.extend(new)
+                    active[q] = False
+                    continue
+                step.append((q, m / np.linalg.norm(m)))
+            if not step:
+                break
+            for (q, m), t in zip(step, oracle.test_many(np.array([m for _, m in step])), strict=True):
+                new[q].append(t)
+                arcs[q][0 if t.member == ends[q] else 1] = m
+        for ts in new:
+            tests.extend(ts)
     member = np.array([t.member for t in tests])
     dirs = np.array([t.direction for t in tests]).reshape(-1, ms.D)
     work = np.array([t.work for t in tests])

@@ -102,6 +102,11 @@ class Scales:
         v = np.asarray(dr, dtype=float) * self._motion_weights  # (D,)
         return math.sqrt(float(v @ v))
 
+    def motion_sizes(self, DR: Array) -> Array:
+        """:meth:`motion_size` of each row of ``DR`` ``(m, D)``: ``(m,)``."""
+        V = np.asarray(DR, dtype=float) * self._motion_weights  # (m, D)
+        return np.sqrt((V * V).sum(axis=1))
+
     def work_tol(self, dr: Array) -> float:
         """Positive-work threshold [J per unit motion] for the object motion ``dr``."""
         return WORK_TOL * self.force * self.motion_size(dr)

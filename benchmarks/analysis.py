@@ -3,6 +3,7 @@
     .venv/bin/python benchmarks/analysis.py            # all figures
     .venv/bin/python benchmarks/analysis.py --quick    # skip the 3^9 enumeration
     .venv/bin/python benchmarks/analysis.py --planar-reports [--repeat 3]   # CPU per planar report only
+    .venv/bin/python benchmarks/analysis.py --planar-sets   # sampled DAFC directions: one by one vs test_many
     .venv/bin/python benchmarks/analysis.py --twelve   # also the full 3^12 feasible list (minutes)
 
 Figures: enumeration of all 3^L combinations (feasibility + DAFC dimension) of the example
@@ -176,6 +177,42 @@ def print_planar_reports(repeat: int) -> None:
           "under 400 ms]")
 
 
+def planar_sampled_sets() -> tuple[float, float, int]:
+    """CPU seconds of the sampled DAFC directions of the first 200 planar combinations (those the
+    report samples, before the refinement), tested one at a time (``DAFCOracle.test``) and all at
+    once (``DAFCOracle.test_many``), each on a fresh oracle that has run ``dafc_nonempty`` first
+    as in a report; the two orders alternate per combination. Returns both totals and the number
+    of directions whose answers differ (membership, reason or work beyond 1e-9: should be 0)."""
+    import itertools
+
+    from analysis.combination import CombinationParts
+    from analysis.dafc import dafc_nonempty, default_samples, sample_directions
+
+    sy = build_system(load_scene(ROOT / "examples" / "planar_disk_envelope.json"))
+    combos = ["".join(c) for c in itertools.product("FSD", repeat=sy.L)][:200]
+    one = many = 0.0
+    differ = 0
+    for k, c in enumerate(combos):
+        parts = CombinationParts.build(sy, c)
+        if parts.ms.a_bar == 0:
+            continue
+        U = sample_directions(parts.ms, default_samples(parts.ms.a_bar))
+        answers = {}
+        for batched in ((False, True) if k % 2 else (True, False)):
+            oracle = parts.oracle()
+            dafc_nonempty(oracle)
+            t = time.process_time()
+            answers[batched] = (oracle.test_many(U) if batched else
+                                [oracle.test(parts.ms.Lambda_r_t @ u, witness=False) for u in U])
+            dt = time.process_time() - t
+            many, one = (many + dt, one) if batched else (many, one + dt)
+        for a, b in zip(answers[False], answers[True], strict=True):
+            if (a.member, a.reason) != (b.member, b.reason) or not np.allclose(a.work, b.work, rtol=1e-9, atol=1e-9,
+                                                                               equal_nan=True):
+                differ += 1
+    return one, many, differ
+
+
 def twelve_contact_reports() -> list[float]:
     """Wall time of the full report of 15 combinations of the 12-contact wrap (SSDDSSSDFDDF, the
     fifth random one, once aborted the process in cdd's matrix_canonicalize)."""
@@ -213,6 +250,8 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="skip the 19,683-combination enumeration")
     ap.add_argument("--planar-reports", action="store_true", help="only the CPU per planar full report")
     ap.add_argument("--repeat", type=int, default=1, help="--planar-reports: passes (best per combination)")
+    ap.add_argument("--planar-sets", action="store_true",
+                    help="only the sampled DAFC directions of the planar reports, one at a time and test_many")
     ap.add_argument("--twelve", action="store_true", help="also the full feasible list of the 12-contact wrap")
     args = ap.parse_args()
     print(f"machine: {machine()}")
@@ -220,6 +259,12 @@ def main() -> None:
           "CPU seconds are robust to it)")
     if args.planar_reports:
         print_planar_reports(args.repeat)
+        print(f"load average after: {os.getloadavg()[0]:.2f}")
+        return
+    if args.planar_sets:
+        one, many, differ = planar_sampled_sets()
+        print(f"planar_disk_envelope sampled DAFC directions of the first 200 combinations (CPU, fresh oracles, "
+              f"orders alternating): one at a time {one:.3f} s, test_many {many:.3f} s; {differ} answers differ")
         print(f"load average after: {os.getloadavg()[0]:.2f}")
         return
     t, f, n, c, lps = time_enum("planar_disk_envelope", workers=1, repeat=3)

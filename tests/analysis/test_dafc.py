@@ -724,3 +724,89 @@ def test_slip_sector_search_proves_emptiness_an_independent_search_agrees(combin
         assert not chk.member, (combination, chk.work, chk.work_min)
         tried += 1
     assert tried > 20
+
+
+_BATCH_PLANAR = ("DFDSS", "SSDSS", "SFSDD", "DFSDD", "FSSDD", "FFFSS", "DFFFS", "SDFFF", "FFFFF", "FDFFF", "DDSDS")
+
+
+def _one_by_one_and_batched(system: GraspSystem, combination: str) -> tuple[list[DirectionTest], list[DirectionTest]]:
+    """The sampled directions of ``dafc_set`` tested one at a time and with ``test_many``, each on a
+    fresh oracle that has run ``dafc_nonempty`` first (as in a report)."""
+    from analysis.dafc import default_samples, sample_directions
+
+    parts = CombinationParts.build(system, combination)
+    U = sample_directions(parts.ms, default_samples(parts.ms.a_bar))
+    one = parts.oracle()
+    dafc_nonempty(one)
+    batch = parts.oracle()
+    dafc_nonempty(batch)
+    return ([one.test(parts.ms.Lambda_r_t @ u, witness=False) for u in U], batch.test_many(U))
+
+
+@pytest.mark.parametrize("scene, combinations", [
+    ("planar_disk_envelope",
+     _BATCH_PLANAR + tuple(sample_combinations(example_system("planar_disk_envelope"), 20, 13))),
+    ("sphere_four_finger_palm", ("FFSDF", "DSFFS", "FFDFF", "DFDDF")),
+])
+def test_test_many_answers_as_one_direction_at_a_time(scene: str, combinations: tuple[str, ...]) -> None:
+    """Issue 13: ``DAFCOracle.test_many`` (the sampled directions decided together: the screen, the
+    allowability, the slip patterns and the certified vertices for all rows at once, an LP only for
+    the first open row) answers every direction as ``test`` does alone: the same membership, reason
+    and exactness, the same direction and coordinates bit for bit, the work and motion to 1e-9.
+    Planar combinations with and without S-points, with slips that depend on the redundancy
+    (DFDSS, tested one by one inside), a~ = 3 (DFSDD); 3-D ones without S-points (a~ = 6, where
+    the force LP's optima rarely recur) and with (one by one inside)."""
+    system = example_system(scene)
+    for combination in combinations:
+        if CombinationParts.build(system, combination).ms.a_bar == 0:
+            continue
+        one, batch = _one_by_one_and_batched(system, combination)
+        assert len(one) == len(batch)
+        for a, b in zip(one, batch, strict=True):
+            assert (a.member, a.reason, a.exact) == (b.member, b.reason, b.exact), combination
+            assert np.array_equal(a.direction, b.direction) and np.array_equal(a.u, b.u), combination
+            np.testing.assert_allclose(b.work, a.work, rtol=1e-9, atol=1e-9)
+            assert (a.zeta_c is None) == (b.zeta_c is None)
+            if a.zeta_c is not None and b.zeta_c is not None:
+                np.testing.assert_allclose(b.zeta_c, a.zeta_c, rtol=0, atol=1e-12)
+
+
+def test_test_many_verdicts_agree_with_an_independent_lp() -> None:
+    """Issue 13: every seventh sampled direction that ``test_many`` decides with a motion (a member,
+    or no positive work) strictly inside the allowable cone, in planar combinations with S-points
+    whose slips do not depend on the redundancy and without S-points: the independent scipy LP of
+    that motion
+    (tests/helpers/independent_dafc.py: its own kinematics, friction cones and S-point friction)
+    finds the motion admissible and gives the same verdict and the same work (1e-6)."""
+    import json
+
+    from closure_helpers import EXAMPLES
+    from independent_dafc import check_member_planar
+
+    from analysis.dafc import default_samples, sample_directions
+
+    system = example_system("planar_disk_envelope")
+    data = json.loads((EXAMPLES / "planar_disk_envelope.json").read_text())
+    checked = {True: 0, False: 0}
+    for combination in ("SSSDS", "SDDFS", "DFSSS", "SSSDD", "FSSDD", "SFSDD", "FDDDD", "DDFDD", "FFFFF"):
+        parts = CombinationParts.build(system, combination)
+        if parts.ms.a_bar == 0:
+            continue
+        oracle = parts.oracle()
+        assert not oracle.slip_depends_on_redundancy
+        tests = oracle.test_many(sample_directions(parts.ms, default_samples(parts.ms.a_bar)))
+        for t in tests[::7]:
+            if t.zeta_c is None or not (t.member or t.reason == "the fingers cannot do positive work"):
+                continue
+            if oracle.B.shape[0] and float(np.max(oracle.B @ t.zeta_c)) > -1e-6 * np.linalg.norm(t.zeta_c):
+                continue  # on a face of the allowable cone (allowed to 1e-7, the independent check says 1e-9)
+            motion = parts.ms.Phi_full @ t.zeta_c  # (M + D,)
+            chk = check_member_planar(data, combination, motion[:system.M], motion[system.M:])
+            assert not chk.motion_errors, (combination, chk.motion_errors)
+            assert chk.member == t.member, (combination, t.u, chk.work, t.work)
+            if np.isfinite(t.work):
+                assert chk.work == pytest.approx(t.work, rel=1e-6, abs=1e-9)
+            else:
+                assert chk.work == -np.inf
+            checked[t.member] += 1
+    assert checked[True] >= 10 and checked[False] >= 10, checked

@@ -343,6 +343,40 @@ def test_certified_bases_give_the_cold_lp_optimum() -> None:
     assert reused > 50
 
 
+def test_certified_bases_for_many_right_hand_sides_give_the_lp_optimum() -> None:
+    # issue 13: solve_many (the batched DAFC tests' redundancies) answers a row only with scipy's
+    # optimum for that right-hand side, and answers the rows solve() answers one at a time
+    from scipy.optimize import linprog
+
+    from analysis.dafc import _RhsBases
+    from analysis.solvers.highs import LPModel
+
+    rng = np.random.default_rng(29)
+    answered = 0
+    for _ in range(5):
+        n, m = 4, 6
+        A = rng.standard_normal((m, n))
+        c = rng.random(n) + 0.1
+        bases = _RhsBases(c, A, np.zeros(n), np.full(n, np.inf))
+        model = LPModel(n, A_ub=A, b_ub=np.zeros(m), lb=0.0)
+        b0 = rng.standard_normal(m)
+        for _ in range(20):  # harvest bases from cold solves
+            model.set_ub_rhs(b0 + 0.3 * rng.standard_normal(m))
+            res = model.solve_cold(c)
+            if res.status == "optimal":
+                bases.harvest(res)
+        B = b0 + 0.3 * rng.standard_normal((40, m))  # (40, m)
+        X, found = bases.solve_many(B)
+        for b, x, ok in zip(B, X, found, strict=True):
+            assert ok == (bases.solve(b) is not None)
+            if ok:
+                ref = linprog(c, A_ub=A, b_ub=b, bounds=(0, None), method="highs")
+                assert ref.status == 0
+                np.testing.assert_allclose(x, ref.x, rtol=0, atol=1e-9)
+                answered += 1
+    assert answered > 50
+
+
 def test_degenerate_optimum_is_not_kept_as_a_basis() -> None:
     # min x1 + x2 s.t. x1 + x2 >= 1, x >= 0: every point of the segment is optimal (a zero
     # multiplier at the vertex), so no basis may answer for another right-hand side

@@ -39,6 +39,15 @@ def _wedge(eps: float):
                               w_ex=np.array([0.0, -1.0, 0.0]))
 
 
+def test_motion_sizes_of_rows_are_the_motion_size_of_each() -> None:
+    """``motion_sizes`` (the batched DAFC tests' thresholds) is ``|(v, l omega)|`` of each row:
+    ``motion_size`` of the row, and known values."""
+    sc = grasp_scales(2, np.array([0.0, 0.0, 2.0]), np.array([[0.5, 0.0], [0.0, -0.3]]))  # l = 0.5
+    DR = np.random.default_rng(13).standard_normal((9, 3))
+    np.testing.assert_allclose(sc.motion_sizes(DR), [sc.motion_size(dr) for dr in DR], rtol=1e-15, atol=0)
+    np.testing.assert_allclose(sc.motion_sizes(np.array([[3.0, 4.0, 0.0], [0.0, 0.0, 2.0]])), [5.0, 1.0], rtol=1e-15)
+
+
 def test_grasps_beyond_the_grip_bound_do_not_hold() -> None:
     for eps, holds in ((1e-2, True), (2e-3, True), (9.99e-4, False), (1e-9, False)):
         sy = _wedge(eps)
