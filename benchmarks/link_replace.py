@@ -32,7 +32,7 @@ from analysis.kinematics import HandKinematics  # noqa: E402
 from analysis.loader import load_scene  # noqa: E402
 from planner import Goal, plan  # noqa: E402
 from planner.graph import ContactStateGraph  # noqa: E402
-from planner.link_replace import replace_edges  # noqa: E402
+from planner.link_replace import first_valid, replace_edges  # noqa: E402
 from planner.plan import PlanStep  # noqa: E402
 from planner.state import all_f  # noqa: E402
 from planner.transition import ContactFigures  # noqa: E402
@@ -60,13 +60,7 @@ def main() -> int:
     t2 = time.process_time()
     edges = replace_edges(graph, state)
     t3 = time.process_time()
-    done = None
-    for e in edges:
-        assert e.validate is not None
-        got = e.validate()
-        if got is not None:
-            done = (e, got)
-            break
+    done = first_valid(edges)
     t4 = time.process_time()
     print(f"release (FDFFFF) planned: {t1 - t0:.2f} s CPU; re-placement edges: {len(edges)} "
           f"({t3 - t2:.2f} s CPU), validated in {t4 - t3:.3f} s CPU; rejections {dict(graph.rejections)}")

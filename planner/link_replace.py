@@ -437,3 +437,14 @@ def validate_replace(nodes: GraphNodes, state: GraspState, new: GraspState, pl: 
                    length + effort)
     nodes.add(new)
     return t.cost, t
+
+
+def first_valid(edges: list[Successor]) -> tuple[Successor, tuple[float, Transition]] | None:
+    """The first of ``edges`` (of :func:`replace_edges`) whose lazy check holds, with its
+    ``(cost, transition)``; None when none does (the reasons are in the graph's rejections)."""
+    for edge in edges:
+        assert edge.validate is not None  # re-placement edges are lazy
+        got = edge.validate()
+        if got is not None:
+            return edge, got
+    return None

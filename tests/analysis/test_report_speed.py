@@ -309,23 +309,29 @@ def test_realisable_direction_nlp_only_when_the_example_direction_has_no_torque_
     assert rep.torque_error.endswith("(and 3 other DAFC directions tried)")
 
 
+def _random_rhs_lp(rng: np.random.Generator, n: int = 4, m: int = 6):  # type: ignore[no-untyped-def]
+    """``min c^T x, A x <= b, x >= 0`` of random data: ``(A, c, b0, bases, model)``, the
+    certified bases of :class:`analysis.dafc._RhsBases` empty and a HiGHS model to harvest them."""
+    from analysis.dafc import _RhsBases
+    from analysis.solvers.highs import LPModel
+
+    A = rng.standard_normal((m, n))  # (m, n)
+    c = rng.random(n) + 0.1  # (n,)
+    bases = _RhsBases(c, A, np.zeros(n), np.full(n, np.inf))
+    model = LPModel(n, A_ub=A, b_ub=np.zeros(m), lb=0.0)
+    return A, c, rng.standard_normal(m), bases, model
+
+
 def test_certified_bases_give_the_cold_lp_optimum() -> None:
     # min c^T x, A x <= b, x >= 0 with b changing: a kept basis answers only when its point is the
     # LP's unique optimum; compare with scipy's LP on every right-hand side, reused or not
     from scipy.optimize import linprog
 
-    from analysis.dafc import _RhsBases
-    from analysis.solvers.highs import LPModel
-
     rng = np.random.default_rng(23)
     reused = 0
     for _ in range(5):
-        n, m = 4, 6
-        A = rng.standard_normal((m, n))
-        c = rng.random(n) + 0.1
-        bases = _RhsBases(c, A, np.zeros(n), np.full(n, np.inf))
-        model = LPModel(n, A_ub=A, b_ub=np.zeros(m), lb=0.0)
-        b0 = rng.standard_normal(m)
+        A, c, b0, bases, model = _random_rhs_lp(rng)
+        m = A.shape[0]
         for _ in range(60):
             b = b0 + 0.3 * rng.standard_normal(m)
             ref = linprog(c, A_ub=A, b_ub=b, bounds=(0, None), method="highs")
@@ -348,18 +354,11 @@ def test_certified_bases_for_many_right_hand_sides_give_the_lp_optimum() -> None
     # optimum for that right-hand side, and answers the rows solve() answers one at a time
     from scipy.optimize import linprog
 
-    from analysis.dafc import _RhsBases
-    from analysis.solvers.highs import LPModel
-
     rng = np.random.default_rng(29)
     answered = 0
     for _ in range(5):
-        n, m = 4, 6
-        A = rng.standard_normal((m, n))
-        c = rng.random(n) + 0.1
-        bases = _RhsBases(c, A, np.zeros(n), np.full(n, np.inf))
-        model = LPModel(n, A_ub=A, b_ub=np.zeros(m), lb=0.0)
-        b0 = rng.standard_normal(m)
+        A, c, b0, bases, model = _random_rhs_lp(rng)
+        m = A.shape[0]
         for _ in range(20):  # harvest bases from cold solves
             model.set_ub_rhs(b0 + 0.3 * rng.standard_normal(m))
             res = model.solve_cold(c)

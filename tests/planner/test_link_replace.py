@@ -30,7 +30,14 @@ from analysis.scene import Scene
 from analysis.torque_limits import hand_torque_limits
 from planner import Goal, plan
 from planner.graph import ContactStateGraph
-from planner.link_replace import face_targets, kept_contacts, place_link_pinned, replace_edges, replace_links
+from planner.link_replace import (
+    face_targets,
+    first_valid,
+    kept_contacts,
+    place_link_pinned,
+    replace_edges,
+    replace_links,
+)
 from planner.plan import Plan, PlanStep
 from planner.state import GraspState, all_f, state_from_scene, state_scene
 from planner.verify import verify_plan
@@ -100,13 +107,7 @@ def relaid(baxter: Scene, released) -> tuple[Plan, object, object]:  # type: ign
     g, p, state = released
     edges = replace_edges(g, state)
     assert edges
-    done = None
-    for e in edges:
-        assert e.validate is not None
-        got = e.validate()
-        if got is not None:
-            done = (e, got)
-            break
+    done = first_valid(edges)
     assert done is not None, g.rejections
     e, (cost, t) = done
     new = g.states[e.node]
