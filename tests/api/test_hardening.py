@@ -420,35 +420,52 @@ def test_the_cost_estimate_picks_the_lane(client: TestClient) -> None:
     assert r.status_code == 200 and r.headers["x-lane"] == "light"
 
 
-def test_health_answers_while_bodies_of_thousands_of_contacts_arrive(limited: TestClient) -> None:
+def test_health_answers_while_bodies_of_thousands_of_contacts_arrive(tmp_path: Path) -> None:
     """Four 1 MB bodies of 8,900 contacts each (two tables, an enumeration job, one combination
     whose letters do not match): refused by counting the contacts before the model validates them
-    (which held the event loop for about a second with three at once), /health unhindered."""
+    (which held the event loop for about a second with three at once), /health unhindered.
+
+    Against ``uvicorn api.main:app`` in its own process: in a TestClient the app shares the test
+    process, whose heap after the whole suite slows the garbage collections the 100,000 dicts of
+    the bodies set off (0.61 s in one clean-clone CI run, 0.24-0.26 s when the module runs alone).
+    The server itself stalls /health by 0.24-0.32 s here: FastAPI decodes each request's JSON on
+    the event loop (about 60 ms a megabyte), a bounded stall, still open in issue 13. The bound
+    0.5 s catches the finding this guards (contacts validated on the event loop: about a second
+    with three bodies at once)."""
+    import httpx
+    from service_helpers import free_port, start_server, stop_server
+
     scene = copy.deepcopy(PLANAR)
     scene["contacts"] = [dict(scene["contacts"][0]) for _ in range(8900)]
     table = json.dumps({"scene": scene}).encode()
     one = json.dumps({"scene": scene, "combination": "FDFDD"}).encode()
     assert 900_000 < len(table) < 1_000_000
-    answers: list[Any] = []
-    headers = {"content-type": "application/json"}
-    threads = [threading.Thread(target=lambda b=b: answers.append(limited.post("/analyses", content=b,
-                                                                                headers=headers)))
-               for b in (table, table, one)]
-    threads.append(threading.Thread(target=lambda: answers.append(limited.post("/enumerations", content=table,
-                                                                                headers=headers))))
-    for t in threads:
-        t.start()
-    time.sleep(0.05)
-    worst = 0.0
-    for _ in range(10):
-        t0 = time.perf_counter()
-        assert limited.get("/health").status_code == 200
-        worst = max(worst, time.perf_counter() - t0)
-    for t in threads:
-        t.join(60)
+    port = free_port()
+    server = start_server(tmp_path, port, CTP_MAX_CONTACTS="9", CTP_REQUEST_TIME_LIMIT="6",
+                          CTP_MAX_BODY_BYTES="1000000", CTP_LIGHT_WORKERS="1")
+    try:
+        with httpx.Client(base_url=f"http://127.0.0.1:{port}", timeout=60) as c:
+            assert c.get("/health").status_code == 200
+            answers: list[Any] = []
+            headers = {"content-type": "application/json"}
+            threads = [threading.Thread(target=lambda u=u, b=b: answers.append(c.post(u, content=b, headers=headers)))
+                       for u, b in (("/analyses", table), ("/analyses", table), ("/analyses", one),
+                                    ("/enumerations", table))]
+            for t in threads:
+                t.start()
+            time.sleep(0.05)
+            worst = 0.0
+            for _ in range(10):
+                t0 = time.perf_counter()
+                assert c.get("/health").status_code == 200
+                worst = max(worst, time.perf_counter() - t0)
+            for t in threads:
+                t.join(60)
+    finally:
+        stop_server(server)
     codes = sorted(r.status_code for r in answers)
     assert codes == [413, 413, 413, 422], [r.text[:200] for r in answers]
     assert all("max_contacts" in r.json()["detail"] for r in answers if r.status_code == 413)
     bad = next(r for r in answers if r.status_code == 422)
     assert bad.json()["detail"] == "combination: 'FDFDD' has 5 letters; the scene has 8900 contacts", bad.text
-    assert worst < 0.3, worst
+    assert worst < 0.5, worst
