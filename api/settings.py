@@ -42,6 +42,10 @@ class Settings(BaseSettings):
     max_contacts: Annotated[int, Field(ge=1, le=16)] = 12
     #: Largest request body accepted (bytes).
     max_body_bytes: Annotated[int, Field(ge=1024)] = 1_000_000
+    #: JSON bodies of the scene-taking routes up to this size (bytes) are read in the server; a
+    #: larger one is decoded and screened (the counts and the model) in a worker first
+    #: (:mod:`api.bodies`), so a megabyte of JSON never holds the event loop.
+    inline_body_bytes: Annotated[int, Field(ge=0)] = 64_000
     #: A running job whose owner stops heart-beating for this long is taken over by another
     #: runner (the same server after a restart, or another instance).
     job_lease_seconds: Annotated[float, Field(gt=0)] = 30.0

@@ -250,6 +250,14 @@ def run_upload(payload: dict[str, Any], progress: Progress | None = None) -> dic
     return {"scene": scene.model_dump(mode="json"), "joints": joints}
 
 
+def run_body(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
+    """A scene-taking route's large JSON body, decoded and run through the route's rule in a
+    worker (:func:`api.bodies.screen_body`): the refusal or ``{"accepted": True}``."""
+    from api.bodies import screen_body
+
+    return screen_body(payload["rule"], payload["body"], payload["limits"])
+
+
 def _rounded(a: Any) -> list[float]:
     return [round(float(x), 9) for x in np.asarray(a).ravel()]
 
@@ -261,6 +269,7 @@ TASKS: dict[str, Callable[[dict[str, Any], Progress | None], dict[str, Any]]] = 
     "geometry": run_geometry,
     "contacts": run_contacts,
     "upload": run_upload,
+    "body": run_body,
 }
 
 

@@ -23,6 +23,7 @@ import time
 import traceback
 from collections.abc import Callable
 from multiprocessing.connection import Connection
+from multiprocessing.reduction import ForkingPickler
 from typing import Any
 
 log = logging.getLogger("ctp.workers")
@@ -102,6 +103,10 @@ def die_with_parent(parent_pid: int) -> None:  # pragma: no cover - runs in the 
 
     threading.Thread(target=watch, name="ctp-parent-watchdog", daemon=True).start()
 
+
+#: Task messages up to this size (bytes) are written to the worker's pipe from the event loop; a
+#: larger one from a thread, since the pipe holds 64 kB and a worker still importing reads nothing.
+INLINE_SEND_BYTES = 32_000
 
 #: The lowest ``nice`` value, at which a worker also asks for Linux's ``SCHED_IDLE`` policy.
 LOWEST_NICE = 19
@@ -289,7 +294,11 @@ class ProcessPool:
         loop.add_reader(fd, readable.set)
         try:
             try:
-                w.conn.send((kind, payload))
+                message = ForkingPickler.dumps((kind, payload))  # what Connection.send writes
+                if len(message) <= INLINE_SEND_BYTES:
+                    w.conn.send_bytes(message)
+                else:  # a worker still importing reads nothing: a full pipe would block the event loop
+                    await asyncio.to_thread(w.conn.send_bytes, message)
             except (OSError, ValueError) as e:
                 raise TaskError("worker_died", f"worker process unavailable: {e}") from None
             while True:

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Request
 from fastapi.responses import Response
 from pydantic import SkipValidation
 
-from api.bodies import validated
+from api.bodies import ANALYSIS_BODY, ScreenedBodyRoute, validated
 from api.cache import BODY_SHA256, answer, cache_key
 from api.deps import (
     AnalysisPoolDep,
@@ -16,9 +16,6 @@ from api.deps import (
     LightPoolDep,
     SettingsDep,
     check_hand_size,
-    check_raw_combination,
-    check_raw_contacts,
-    check_raw_hand_size,
     check_scene_size,
     combination_length_error,
 )
@@ -26,7 +23,7 @@ from api.errors import ApiError
 from api.lanes import analysis_lane, run_in_lane, use_lane
 from api.schemas import AnalysisCreate, AnalysisPublic, ErrorBody
 
-router = APIRouter(tags=["analyses"])
+router = APIRouter(tags=["analyses"], route_class=ScreenedBodyRoute)
 
 _ERRORS: dict[int | str, dict[str, Any]] = {
     413: {"model": ErrorBody, "description": "too many contacts or body too large (``limit``)"},
@@ -48,11 +45,10 @@ async def create_analysis(raw: Annotated[AnalysisCreate, SkipValidation], reques
     and parameters) is answered from the content-addressed cache (header ``X-Cache: hit``), one
     identical to a request still running waits for its answer (``X-Cache: shared``)."""
     # the counts that need no model first: 413/422 before it spends time on a huge chain or
-    # thousands of contacts (its checks share the interpreter with the event loop)
-    check_raw_hand_size(raw, settings)
-    check_raw_contacts(raw, settings, enumerate_all=not (isinstance(raw, dict) and raw.get("combination")))
-    check_raw_combination(raw)
-    body = await validated(AnalysisCreate, raw)  # off the event loop (api/bodies.py)
+    # thousands of contacts (its checks share the interpreter with the event loop); the model off
+    # the event loop; a body over inline_body_bytes was screened in a worker (api/bodies.py)
+    ANALYSIS_BODY.check_raw(raw, settings)
+    body = await validated(AnalysisCreate, raw)
     scene = body.scene
     if body.combination is not None and len(body.combination) != len(scene.contacts):
         raise combination_length_error(body.combination, len(scene.contacts))

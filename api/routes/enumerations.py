@@ -8,12 +8,12 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query, Response
 from pydantic import SkipValidation
 
-from api.bodies import validate_body
-from api.deps import RunnerDep, SettingsDep, StoreDep, check_raw_contacts, check_raw_hand_size, check_scene
+from api.bodies import ENUMERATION_BODY, ScreenedBodyRoute
+from api.deps import RunnerDep, SettingsDep, StoreDep, check_scene
 from api.routes import _jobs
 from api.schemas import AnalysisPublic, EnumerationCreate, EnumerationPublic, ErrorBody, JobList, JobStatus
 
-router = APIRouter(prefix="/enumerations", tags=["enumerations"])
+router = APIRouter(prefix="/enumerations", tags=["enumerations"], route_class=ScreenedBodyRoute)
 KIND, WHAT = "enumeration", "enumeration"
 
 
@@ -22,9 +22,9 @@ KIND, WHAT = "enumeration", "enumeration"
 def create_enumeration(raw: Annotated[EnumerationCreate, SkipValidation], settings: SettingsDep, store: StoreDep,
                        runner: RunnerDep, response: Response) -> dict[str, Any]:
     """Queue the enumeration of every combination; 202 with the job."""
-    check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
-    check_raw_contacts(raw, settings, enumerate_all=True)  # or on thousands of contacts
-    body = validate_body(EnumerationCreate, raw)  # in the thread this route runs in (api/bodies.py)
+    # 413 before the model spends time on a huge chain or thousands of contacts, then the model in
+    # the thread this route runs in; a body over inline_body_bytes was screened in a worker (api/bodies.py)
+    body = ENUMERATION_BODY.validate(raw, settings)
     check_scene(body.scene, settings, enumerate_all=True)
     limit = _jobs.time_limit(body.time_limit, settings.job_time_limit)
     job = _jobs.submit(store, runner, KIND, {"scene": body.scene.model_dump(mode="json"), "time_limit": limit})

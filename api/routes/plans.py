@@ -8,14 +8,14 @@ from fastapi import APIRouter, Query, Response
 from pydantic import SkipValidation
 
 from analysis.scene import MAX_MAGNITUDE
-from api.bodies import validate_body
-from api.deps import RunnerDep, SettingsDep, StoreDep, check_raw_hand_size, check_scene
+from api.bodies import PLAN_BODY, ScreenedBodyRoute
+from api.deps import RunnerDep, SettingsDep, StoreDep, check_scene
 from api.errors import ApiError
 from api.routes import _jobs
 from api.schemas import ErrorBody, JobList, JobStatus, PlanCreate, PlanPublic
 from planner.goals import check_combination
 
-router = APIRouter(prefix="/plans", tags=["plans"])
+router = APIRouter(prefix="/plans", tags=["plans"], route_class=ScreenedBodyRoute)
 KIND, WHAT = "plan", "plan"
 
 
@@ -24,8 +24,9 @@ KIND, WHAT = "plan", "plan"
 def create_plan(raw: Annotated[PlanCreate, SkipValidation], settings: SettingsDep, store: StoreDep,
                 runner: RunnerDep, response: Response) -> dict[str, Any]:
     """Queue a plan from the scene's grasp to ``goal``; 202 with the job (``url`` to poll)."""
-    check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
-    body = validate_body(PlanCreate, raw)  # in the thread this route runs in (api/bodies.py)
+    # 413 before the model spends time on a huge chain, then the model in the thread this route
+    # runs in; a body over inline_body_bytes was screened in a worker (api/bodies.py)
+    body = PLAN_BODY.validate(raw, settings)
     check_scene(body.scene, settings)
     if body.goal.combination is not None and len(body.goal.combination) != len(body.scene.contacts):
         raise ApiError(422, f"goal.combination: '{body.goal.combination}' has {len(body.goal.combination)} "

@@ -10,14 +10,14 @@ from pydantic import SkipValidation
 from analysis.exceptions import SceneError
 from analysis.loader import FILE_ERROR, read_scene_data
 from analysis.scene import Scene
-from api.bodies import validated
-from api.deps import AnalysisPoolDep, LightPoolDep, SettingsDep, _hand_size_error, check_hand_size, check_raw_hand_size
+from api.bodies import CONTACTS_BODY, GEOMETRY_BODY, ScreenedBodyRoute, validated
+from api.deps import AnalysisPoolDep, LightPoolDep, SettingsDep, _hand_size_error, check_hand_size
 from api.errors import ApiError
 from api.lanes import geometry_lane, run_in_lane, upload_lane, use_lane
 from api.schemas import ContactsCreate, ContactsPublic, ErrorBody, ExampleScene, GeometryCreate
 from api.workers import TaskError, TaskTimeout
 
-router = APIRouter(prefix="/scenes", tags=["scenes"])
+router = APIRouter(prefix="/scenes", tags=["scenes"], route_class=ScreenedBodyRoute)
 
 
 @router.get("/examples", response_model=list[ExampleScene])
@@ -87,7 +87,7 @@ async def scene_geometry(raw: Annotated[GeometryCreate, SkipValidation], setting
     Computed in a worker under ``request_time_limit`` (422 with ``limit`` past it): a light one for
     a few configurations, else a heavy one (api/lanes.py, ``X-Lane``); scenes over ``max_joints``
     joints get 413."""
-    check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
+    GEOMETRY_BODY.check_raw(raw, settings)  # 413 before the model spends time on a huge chain
     body = await validated(GeometryCreate, raw)  # off the event loop (api/bodies.py)
     scene: Scene = body.scene
     check_hand_size(scene, settings)
@@ -114,7 +114,7 @@ async def scene_contacts(raw: Annotated[ContactsCreate, SkipValidation], setting
     (``ctp contacts --touch``). An object that touches nothing is a 422 at ``scene.contacts``.
 
     Computed in a light worker under ``request_time_limit``; scenes over ``max_joints`` joints get 413."""
-    check_raw_hand_size(raw, settings)  # 413 before the model spends time on a huge chain
+    CONTACTS_BODY.check_raw(raw, settings)  # 413 before the model spends time on a huge chain
     body = await validated(ContactsCreate, raw)  # off the event loop (api/bodies.py)
     payload = {"scene": body.scene, "tolerance": body.tolerance, "mu": body.mu, "touch": body.touch}
     use_lane(request, "light")

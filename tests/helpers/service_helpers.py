@@ -90,6 +90,33 @@ def start_server(tmp: Path, port: int, **env: str) -> Any:
     raise AssertionError("server did not start within 90 s")
 
 
+def health_while_posting(base_url: str, posts: list[tuple[str, bytes]], polls: int = 10) -> tuple[list[Any], float]:
+    """POST each ``(path, JSON bytes)`` of ``posts`` at once (a thread each) and meanwhile time
+    ``polls`` requests of ``/health``: the answers (in their order of arrival) and the slowest
+    /health in seconds (each must be 200)."""
+    import threading
+
+    import httpx
+
+    answers: list[Any] = []
+    headers = {"content-type": "application/json"}
+    with httpx.Client(base_url=base_url, timeout=60) as c:
+        assert c.get("/health").status_code == 200
+        threads = [threading.Thread(target=lambda u=u, b=b: answers.append(c.post(u, content=b, headers=headers)))
+                   for u, b in posts]
+        for t in threads:
+            t.start()
+        time.sleep(0.05)
+        worst = 0.0
+        for _ in range(polls):
+            t0 = time.perf_counter()
+            assert c.get("/health").status_code == 200
+            worst = max(worst, time.perf_counter() - t0)
+        for t in threads:
+            t.join(60)
+    return answers, worst
+
+
 def kill_tree(proc: Any) -> None:
     """SIGKILL the server and its worker processes (its own session), as a crash would."""
     import contextlib
