@@ -24,8 +24,11 @@ OMPL's path fails those checks, the integrated path is densified and checked the
 For a 2-D disk object (:func:`rolls_on_links`) the sticking contacts on the side of a finger link
 roll (:class:`~planner.manifold.ContactManifold` with ``rolling=True``: the contact point moves by
 ``r`` times the disk's turn relative to the link on both surfaces, exactly), those at a sharp link
-tip and on fixed bodies keep their glued points (exact there); :func:`rolled_contacts` gives the
-contacts where the motion leaves them.
+tip and on fixed bodies keep their glued points (exact there); for a 3-D sphere
+(:func:`rolls_on_planes`) the sticking contacts on a flat face of a fixed body (a table) roll (the
+sphere turns about a fixed axis ``omega`` while its centre moves by ``r omega x n``, exactly), its
+contacts on links stay glued; :func:`rolled_contacts` gives the contacts where the motion leaves
+them.
 """
 
 from __future__ import annotations
@@ -46,7 +49,7 @@ from analysis.geometry import link_shapes, segment_normal_cone, shape_normal_con
 from analysis.kinematics import BodyRef, HandKinematics
 from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
-from analysis.scene import Disk, Scene
+from analysis.scene import Disk, Scene, Sphere
 from planner.budget import CheckBudget
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel
 from planner.ik import joint_limits
@@ -71,9 +74,18 @@ class ObjectMotion:
 
 def rolls_on_links(scene: Scene) -> bool:
     """Do the sticking contacts on a link's side roll in object motions? For a 2-D disk object
-    (:class:`~planner.manifold.ContactManifold` ``rolling=True``); 3-D spheres and cylinders roll
-    non-holonomically, which the planner does not follow (their contacts stay glued)."""
+    (:class:`~planner.manifold.ContactManifold` ``rolling=True``); a 3-D sphere rolls on the flat
+    faces of fixed bodies only (:func:`rolls_on_planes`), its contacts on links stay glued."""
     return scene.dim == 2 and isinstance(scene.object.shape, Disk)
+
+
+def rolls_on_planes(scene: Scene) -> bool:
+    """Do the sticking contacts of a 3-D sphere on the flat faces of fixed bodies (a table) roll in
+    object motions (:class:`~planner.manifold.ContactManifold` ``rolling=True``: the sphere turns
+    about a fixed axis while its centre moves by ``r omega x n``, the contact point moving by ``r``
+    times the turn on the plane and on the sphere)? Always for a sphere with fixed bodies: an F
+    contact on a plane is a rolling one (its glued point would sink the sphere into the plane)."""
+    return scene.dim == 3 and isinstance(scene.object.shape, Sphere) and bool(scene.fixed_bodies)
 
 
 def motion_manifold(scene: Scene, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
@@ -81,9 +93,10 @@ def motion_manifold(scene: Scene, hand: HandKinematics, state: GraspState, stick
                     motion_space: Array | None = None) -> ContactManifold:
     """The contact manifold an object motion from ``state`` follows (and :mod:`planner.verify`
     checks): the sticking contacts glued (eq. 7), rolling on a link's side for a 2-D disk
-    (:func:`rolls_on_links`), the ``sliding`` ones touching (eq. 5)."""
+    (:func:`rolls_on_links`) and on a fixed body's face for a 3-D sphere (:func:`rolls_on_planes`),
+    the ``sliding`` ones touching (eq. 5)."""
     return ContactManifold(hand, state, sticking, sliding, scene, direction=direction, motion_space=motion_space,
-                           rolling=rolls_on_links(scene))
+                           rolling=rolls_on_links(scene) or rolls_on_planes(scene))
 
 
 def rolled_contacts(hand: HandKinematics, scene: Scene, state: GraspState, sticking: Sequence[int], q: Array,
@@ -94,13 +107,18 @@ def rolled_contacts(hand: HandKinematics, scene: Scene, state: GraspState, stick
     new point and inward normal on the disk, :meth:`ContactManifold.rolling_contact`), the others as
     in ``contacts`` (default: ``state.contacts``)."""
     out = list(state.contacts if contacts is None else contacts)
-    if not rolls_on_links(scene) or not sticking:
+    if not (rolls_on_links(scene) or rolls_on_planes(scene)) or not sticking:
         return tuple(out)
     man = motion_manifold(scene, hand, state, sticking)
     x = np.concatenate([np.asarray(q, dtype=float), np.asarray(s, dtype=float)])  # (M + D,)
     for k in range(len(man.rolls)):
         i, y, p_obj, n_obj = man.rolling_contact(k, x)
         ref = man.rolls[k][1]
+        c = out[i]
+        out[i] = GraspContact(c.body, hand.to_local(ref, y, q), p_obj, n_obj, c.mu, c.origin)
+    for k in range(len(man.plane_rolls)):  # a sphere on a plane: the new point on both
+        i, y, p_obj, n_obj = man.plane_rolling_contact(k, x)
+        ref = man.plane_rolls[k][1]
         c = out[i]
         out[i] = GraspContact(c.body, hand.to_local(ref, y, q), p_obj, n_obj, c.mu, c.origin)
     return tuple(out)
