@@ -49,6 +49,7 @@ from analysis.geometry import link_shapes, segment_normal_cone, shape_normal_con
 from analysis.kinematics import BodyRef, HandKinematics
 from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
+from analysis.rotations import matrix_to_rotvec
 from analysis.scene import Disk, Scene, Sphere
 from planner.budget import CheckBudget
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel
@@ -393,7 +394,8 @@ def plan_object_motion(
     ``goal`` (``goal.direction`` in ``goal.motion_space``; else the straight line to its end), the
     validity checker keeps it between the two ends of that path and clear of the fixed bodies, and
     every segment of the densified object path must lie within :data:`MIN_DIRECTION_COSINE` of
-    the direction. Where OMPL finds no path that passes, the integrated path ``goal`` itself is
+    the direction, and a sphere rolling on a plane must not slip along it (:func:`rolling_slip` at
+    most :data:`ROLL_SLIP_TOL`). Where OMPL finds no path that passes, the integrated path ``goal`` itself is
     densified and checked the same way (its ``planner_states`` then 0). ``None`` if neither
     passes."""
     hand = model.hand
@@ -514,6 +516,8 @@ def plan_object_motion(
             return None
         if man.direction is not None and direction_cosines(X[:, M:], man.direction).min() < MIN_DIRECTION_COSINE:
             return None  # a segment of the object path goes back along its line
+        if man.plane_rolls and rolling_slip(man, X[:, M:]) > ROLL_SLIP_TOL:
+            return None  # a sphere rolling on a plane along a path that is not a ray: it slips
         poses = np.array([man.pose(x[M:]).vector() for x in X])  # (k, D)
         length = float(np.sum(np.linalg.norm(np.diff(poses, axis=0), axis=1)))
         return ConstrainedObjectMotion(X[:, :M], poses, X[:, M:], goal.separations, length, residual, step, len(X),
@@ -533,6 +537,32 @@ def plan_object_motion(
                       for q, v in zip(goal.q_path, goal.pose_path, strict=True)])
         out = checked(X, 0)
     return out
+
+
+#: scene units: the largest slip (:func:`rolling_slip`) of a sphere rolling on a plane along a
+#: planned object path (:func:`plan_object_motion` refuses a path that slips more)
+ROLL_SLIP_TOL = 1e-6
+
+
+def rolling_slip(man: ContactManifold, S: Array) -> float:
+    """The slip along the object displacement path ``S`` ``(n, D)`` (the ``s`` of ``man``) of every
+    sphere rolling on a plane (:attr:`ContactManifold.plane_rolls`): per segment ``k`` the
+    sphere's material point at the contact moves by ``dp_k - r omega_k x n`` (``omega_k =
+    log(R_{k+1} R_k^T)``, a constant twist over the segment), zero when it rolls; the largest sum
+    of their lengths over the path among the contacts (0 without such contacts). Rays
+    ``s = t dr`` roll exactly; other paths of the manifold slip at second order (rolling is
+    non-holonomic)."""
+    if not man.plane_rolls or len(S) < 2:
+        return 0.0
+    poses = [man.pose(s) for s in np.asarray(S, dtype=float)]
+    worst = 0.0
+    for _, _, n in man.plane_rolls:
+        total = 0.0
+        for a, b in itertools.pairwise(poses):
+            omega = matrix_to_rotvec(b.rotation @ a.rotation.T)  # (3,)
+            total += float(np.linalg.norm(b.position - a.position - man.radius * np.cross(omega, n)))
+        worst = max(worst, total)
+    return worst
 
 
 #: every segment of an object path lies within this cosine of the analysed direction (issue 11)

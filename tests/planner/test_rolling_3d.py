@@ -21,7 +21,14 @@ from analysis.rotations import matrix_to_rotvec
 from analysis.scene import Scene
 from planner import Goal, plan
 from planner.manifold import ContactManifold
-from planner.object_motion import motion_manifold, rolled_contacts, rolls_on_links, rolls_on_planes
+from planner.object_motion import (
+    ROLL_SLIP_TOL,
+    motion_manifold,
+    rolled_contacts,
+    rolling_slip,
+    rolls_on_links,
+    rolls_on_planes,
+)
 from planner.options import PlannerOptions
 from planner.plan import Plan, PlanStep
 from planner.state import state_from_scene
@@ -132,7 +139,8 @@ def test_sphere_rolls_exactly_along_a_rolling_ray(scene: Scene, omega: list[floa
 def test_rolling_rows_slip_off_a_ray(scene: Scene) -> None:
     """Rolling is non-holonomic: a point of the manifold reached along a bent path of it (two rays,
     ``w`` turning its direction) is on the rows, but the bent path slips (the contact's material
-    point moves), at second order; the straight ray to the same point rolls."""
+    point moves), at second order; the straight ray to the same point rolls. The planner's
+    :func:`rolling_slip` measures the same."""
     hand = HandKinematics.from_scene(scene)
     st = state_from_scene(scene, hand)
     man = motion_manifold(scene, hand, st, [TABLE])
@@ -153,7 +161,10 @@ def test_rolling_rows_slip_off_a_ray(scene: Scene) -> None:
     for s in (bent[-1], straight[-1]):
         assert float(np.linalg.norm(man.function(np.concatenate([st.q, s])))) <= 1e-15
     assert slip(straight) <= 1e-12
-    assert slip(bent) > 1e-3 * R  # ~ r |w x dw| / 2 on the second leg
+    assert slip(bent) > 1e-3 * R  # second order, on the second leg
+    # the planner's measure (plan_object_motion refuses a path above ROLL_SLIP_TOL) agrees
+    np.testing.assert_allclose(rolling_slip(man, np.array(bent)), slip(bent), rtol=1e-12)
+    assert rolling_slip(man, np.array(straight)) <= 1e-12 < ROLL_SLIP_TOL < slip(bent)
 
 
 def _roll_plan(scene: Scene) -> Plan:
