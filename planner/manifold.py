@@ -108,11 +108,12 @@ class ContactManifold:
     ``r |(J_l(w) - I) dw x n|``, second order; the direction rows keep an object motion on the
     ray ``s = t dr`` whenever the other contacts leave the sphere every rolling motion (the
     motion space is the rolling twists), :func:`planner.object_motion.plan_object_motion` refuses
-    a path that slips (:func:`planner.object_motion.rolling_slip`) and :mod:`planner.verify` measures
-    the slip along every path. The rows' Jacobian ``[0, I, r [n]x]`` has the row space of the glued point's ``[-I,
-    -r [n]x]`` (its object point ``-r n`` from the centre), so the tangent space at ``s = 0`` is
-    still the motion space. A glued point pivots the sphere about it, sinking it ``r (1 - cos
-    theta)`` into the plane. :meth:`plane_rolling_contact` gives the contact after a motion."""
+    a path that slips (:func:`planner.object_motion.rolling_slip`) and :mod:`planner.verify`
+    measures the slip along every path. The rows' Jacobian ``[0, I, r [n]x]`` has the row space
+    of the glued point's ``[-I, -r [n]x]`` (its object point ``-r n`` from the centre), so the
+    tangent space at ``s = 0`` is still the motion space. A glued point pivots the sphere about
+    it, sinking it ``r (1 - cos theta)`` into the plane. :meth:`plane_rolling_contact` gives the
+    contact after a motion."""
 
     def __init__(self, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
                  sliding: Sequence[int] = (), scene: Scene | None = None, direction: Array | None = None,
