@@ -6,6 +6,7 @@
     .venv/bin/python benchmarks/planning.py --slide         # also a pose goal reached by sliding
     .venv/bin/python benchmarks/planning.py --lift          # also the two-arm 3 cm box lift (target < 60 s)
     .venv/bin/python benchmarks/planning.py --wrap          # also the nine-contact wrap (target: a plan < 60 s)
+    .venv/bin/python benchmarks/planning.py --roll          # also a sphere rolled 5 cm on a table (3-D rolling)
     .venv/bin/python benchmarks/planning.py --all           # every scene above
 
 For each scene: whether a plan to active closure was found, its steps, nodes expanded and
@@ -33,6 +34,7 @@ from machine import machine  # noqa: E402
 
 from analysis.loader import load_scene  # noqa: E402
 from planner import Goal, plan  # noqa: E402
+from planner.options import PlannerOptions  # noqa: E402
 from planner.verify import verify_plan  # noqa: E402
 
 
@@ -41,7 +43,8 @@ def load() -> str:
     return f"{os.getloadavg()[0]:.2f}"
 
 
-def run(name: str, target: float, repeat: int, time_limit: float | None, goal: Goal | None = None) -> None:
+def run(name: str, target: float, repeat: int, time_limit: float | None, goal: Goal | None = None,
+        options: PlannerOptions | None = None) -> None:
     scene = load_scene(ROOT / "examples" / f"{name}.json")
     goal = goal or Goal(type="active")
     totals = []
@@ -50,7 +53,7 @@ def run(name: str, target: float, repeat: int, time_limit: float | None, goal: G
     load_before = load()
     for _ in range(repeat):
         c0 = time.process_time()
-        p = plan(scene, goal, time_limit=time_limit)
+        p = plan(scene, goal, time_limit=time_limit, options=options)
         cpus.append(time.process_time() - c0)
         totals.append(p.stats.seconds_total)
         last = p
@@ -81,7 +84,9 @@ def main() -> None:
                     help="also the planar pose goal (0.1, 0.5, 0) reached by sliding the disk on the palm")
     ap.add_argument("--lift", action="store_true", help="also the two-arm lift of baxter_hug_box (3 cm)")
     ap.add_argument("--wrap", action="store_true", help="also sphere_four_finger_wrap to active closure (9 contacts)")
-    ap.add_argument("--all", action="store_true", help="every scene: --sphere --slide --lift --wrap")
+    ap.add_argument("--roll", action="store_true",
+                    help="also sphere_table_roll: a finger rolls the sphere 5 cm along the table (no sliding)")
+    ap.add_argument("--all", action="store_true", help="every scene: --sphere --slide --lift --wrap --roll")
     ap.add_argument("--time-limit", type=float, default=None)
     args = ap.parse_args()
     print("machine:", machine())
@@ -97,6 +102,10 @@ def main() -> None:
                  rotation_tolerance=0.3))
     if args.wrap or args.all:
         run("sphere_four_finger_wrap", 60.0, args.repeat, args.time_limit or 300.0)
+    if args.roll or args.all:  # rolling in 3-D: the table contact rolls in every object motion
+        run("sphere_table_roll", 10.0, args.repeat, args.time_limit or 120.0,
+            Goal(type="displacement", displacement=[0.05, 0.0, 0.0, 0.0, 0.0, 0.0], position_tolerance=0.005,
+                 rotation_tolerance="free"), PlannerOptions(sliding_motions=False))
 
 
 if __name__ == "__main__":

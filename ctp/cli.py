@@ -572,6 +572,10 @@ def plan(
     link_replacement: Annotated[bool, typer.Option(
         help="also lay a link an arm let go of flat on a face of a box object again, the other arms "
              "pinned (whole-arm regrasps)")] = False,
+    sliding: Annotated[bool | None, typer.Option(
+        "--sliding/--no-sliding",
+        help="object motions in which the contacts on fixed bodies slide (S) while the fingers stick; "
+             "default: for pose and displacement goals (--no-sliding: a sphere on a table only rolls)")] = None,
     out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
     replay: Annotated[bool, typer.Option(help="replay the whole plan in MuJoCo (one continuous simulation)")] = False,
     posture_rate: Annotated[float, typer.Option(help="--replay: " + POSTURE_HELP)] = POSTURE_RATE,
@@ -619,7 +623,7 @@ def plan(
 
         try:
             result = make_plan(sc, g, progress=step, time_limit=time_limit,
-                               options=PlannerOptions(link_replacement=link_replacement))
+                               options=PlannerOptions(link_replacement=link_replacement, sliding_motions=sliding))
         except SceneError as e:
             _fail(str(e))
         except CTPError as e:

@@ -91,7 +91,29 @@ class ContactManifold:
     about it and, on a link's side, pushes it into the link by ``r (1 - cos dtheta)`` while the
     true contact point moves by ``r dtheta``; at a sharp link tip (``rho = 0``) both agree, so
     contacts at a link's end keep the glued rows. :meth:`rolling_contact` gives the contact after
-    a motion."""
+    a motion.
+
+    With ``rolling=True`` for a 3-D sphere (radius ``r``) a sticking contact on a flat face of a
+    fixed body (a table: the face's outward normal ``n`` points into the sphere) rolls instead of
+    pivoting about a glued point. Its three rows are ``dp + r n x w = 0`` (``s = (dp, w)``): the
+    normal one, ``n . dp = 0``, keeps the centre ``r`` off the plane (the gap, exact), the two
+    tangential ones are the no-slip condition ``v = r omega x n`` integrated along the ray
+    ``s = t (v, omega)``: the object turns about the fixed world axis ``omega`` at a constant rate
+    (``R = exp(t omega) R_0``) while its centre moves by ``t v``, a constant twist whose contact
+    point on the sphere, ``p - r n``, has velocity ``v + omega x (-r n) = 0`` at every ``t``:
+    rolling without slipping, exact and not first order only, the contact point moving by
+    ``r |omega_t| t`` on the plane and on the sphere (``omega_t`` the tangential part of
+    ``omega``; a spin ``omega . n`` moves neither). Rolling is non-holonomic: along a path of
+    this manifold that is not such a ray (``w`` not of one direction) the sphere slips by
+    ``r |(J_l(w) - I) dw x n|``, second order; the direction rows keep an object motion on the
+    ray ``s = t dr`` whenever the other contacts leave the sphere every rolling motion (the
+    motion space is the rolling twists), :func:`planner.object_motion.plan_object_motion` refuses
+    a path that slips (:func:`planner.object_motion.rolling_slip`) and :mod:`planner.verify`
+    measures the slip along every path. The rows' Jacobian ``[0, I, r [n]x]`` has the row space
+    of the glued point's ``[-I, -r [n]x]`` (its object point ``-r n`` from the centre), so the
+    tangent space at ``s = 0`` is still the motion space. A glued point pivots the sphere about
+    it, sinking it ``r (1 - cos theta)`` into the plane. :meth:`plane_rolling_contact` gives the
+    contact after a motion."""
 
     def __init__(self, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
                  sliding: Sequence[int] = (), scene: Scene | None = None, direction: Array | None = None,
@@ -103,18 +125,27 @@ class ContactManifold:
         self.items: list[tuple[BodyRef | None, Array, Array]] = []  # (finger body or None, point_body, point_obj)
         #: rolling contacts: (contact index, link, side +-1, sigma_0, gamma_0)
         self.rolls: list[tuple[int, BodyRef, float, float, float]] = []
+        #: rolling contacts of a 3-D sphere on a flat face of a fixed body: (contact index, body,
+        #: the face's outward unit normal ``n`` ``(3,)``, world)
+        self.plane_rolls: list[tuple[int, BodyRef, Array]] = []
         self.radius = 0.0
         if rolling:
-            if scene is None or self.dim != 2 or not isinstance(scene.object.shape, Disk):
-                raise SceneError(("object", "shape"), "rolling contacts are followed for 2-D disk objects only "
-                                 "(pass the scene of a planar disk)")
+            if scene is None or not isinstance(scene.object.shape, Disk | Sphere) or (
+                    (self.dim == 2) != isinstance(scene.object.shape, Disk)):
+                raise SceneError(("object", "shape"), "rolling contacts are followed for 2-D disk and 3-D sphere "
+                                 "objects only (pass the scene of a disk or a sphere)")
             self.scene = scene
             self.radius = float(scene.object.shape.radius)
         for i in sticking:
             c = state.contacts[i]
             ref = hand.resolve_body(c.body)
             assert ref is not None
-            if rolling and ref.finger is not None:
+            if rolling and self.dim == 3 and ref.finger is None:
+                n = self._fixed_face_normal(ref, state.world_point(i))
+                if n is not None:
+                    self.plane_rolls.append((i, ref, n))
+                    continue
+            if rolling and self.dim == 2 and ref.finger is not None:
                 side = self._rolling_side(ref, state.q)
                 if side is not None:
                     sig, gamma = self._roll_coords(ref, side, state.q, self.start)
@@ -169,7 +200,8 @@ class ContactManifold:
             Uc, sv, _ = np.linalg.svd(C, full_matrices=False)
             self.complement = Uc[:, sv > 1e-9]  # (D, k)
         self._roll0 = self.dim * len(self.items)  # first rolling row
-        self._slide0 = self._roll0 + 2 * len(self.rolls)  # first sliding row
+        self._plane0 = self._roll0 + 2 * len(self.rolls)  # first row of a sphere rolling on a plane
+        self._slide0 = self._plane0 + 3 * len(self.plane_rolls)  # first sliding row
         #: the row of each sliding contact (none for a link's contact at the joint with a link that
         #: sticks to the same face, :meth:`_implied_at_joint`)
         self._row_of: dict[int, int] = {}
@@ -423,6 +455,26 @@ class ContactManifold:
         y = pose.position - self.radius * u  # on both surfaces when the gap is zero
         return i, y, pose.to_local(y), pose.R_d.T @ u
 
+    def _fixed_face_normal(self, ref: BodyRef, x: Array) -> Array | None:
+        """The outward unit normal ``(3,)`` of the fixed body ``ref``'s face at the world point ``x``
+        ``(3,)`` where the sphere touches it there, ``None`` at an edge or a vertex (one normal
+        only: a face) or for a body without normal cones."""
+        body = next(b for b in self.scene.fixed_bodies if b.name == ref.name)
+        cone = shape_normal_cone(body.shape, x, 3, GEOMETRY_TOL)
+        if cone is None or cone.generators.shape[0] != 1:
+            return None
+        n = np.asarray(cone.generators[0], dtype=float)
+        return n / np.linalg.norm(n)
+
+    def plane_rolling_contact(self, k: int, x: Array) -> tuple[int, Array, Array, Array]:
+        """Rolling contact ``k`` of a sphere on a plane at ``x``: its contact index, the touching
+        point ``p - r n`` (world ``(3,)``, on the plane), the point on the sphere and its inward
+        normal (object frame ``(3,)``)."""
+        pose = self.pose(x[self.M:])
+        i, _, n = self.plane_rolls[k]
+        y = pose.position - self.radius * n
+        return i, y, pose.to_local(y), pose.R_d.T @ n
+
     def sliding_contact(self, k: int, x: Array) -> tuple[Array, Array, Array]:
         """Sliding contact ``k`` at ``x``: body point (world ``(d,)``), object point and inward normal
         (object frame ``(d,)``) where the body touches the disk or sphere."""
@@ -571,7 +623,9 @@ class ContactManifold:
             xb = pb[:d] if ref is None else self.hand.point_position(ref, pb, q)
             out[d * k: d * k + d] = xb - pose.to_world(po)
         if self.rolls:
-            out[self._roll0: self._slide0] = self._rolling_rows(x)
+            out[self._roll0: self._plane0] = self._rolling_rows(x)
+        for k, (_, _, n) in enumerate(self.plane_rolls):  # dp + r n x w: rolling on a plane
+            out[self._plane0 + 3 * k: self._plane0 + 3 * k + 3] = s[:3] + self.radius * np.cross(n, s[3:])
         for k, ref in enumerate(self.sliding):  # S-points: the gap to the disk/sphere is zero
             if k not in self._row_of:
                 continue
@@ -681,7 +735,11 @@ class ContactManifold:
             else:
                 J[r, self.M + 3:] = skew(y) @ _left_jacobian_so3(s[3:])
         if self.rolls:
-            J[self._roll0: self._slide0] = self._rolling_jacobian(x)
+            J[self._roll0: self._plane0] = self._rolling_jacobian(x)
+        for k, (_, _, n) in enumerate(self.plane_rolls):  # [0, I, r [n]x]
+            r = slice(self._plane0 + 3 * k, self._plane0 + 3 * k + 3)
+            J[r, self.M: self.M + 3] = np.eye(3)
+            J[r, self.M + 3:] = self.radius * skew(n)
         self._sliding_jacobian(J, q, s, pose)
         J[self._base:, self.M:] = self.complement.T
         return J

@@ -10,7 +10,8 @@ combination is feasible (18 and 22), the direction is a DAFC member, and the tor
 not empty; its recommended torque and the motion ``dzeta_c`` chosen by (31) move the object until
 the D-contacts have separated by ``clearance`` (towards a goal pose: at most ``motion_step``).
 The path of hand and object on the contact manifold ``A_c [dq; dr] = 0`` (for a 2-D disk the
-contacts on a link's side rolling, :func:`~planner.object_motion.motion_manifold`) is integrated
+contacts on a link's side rolling, for a 3-D sphere the F contacts on a fixed body's face:
+:func:`~planner.object_motion.motion_manifold`) is integrated
 (:func:`~planner.object_motion.integrate_object_motion`) and then planned by OMPL's constrained
 planning (:func:`~planner.object_motion.plan_object_motion`); the state after it has the sliding
 and the rolling contacts where the motion left them (new points on the body and the object).

@@ -24,8 +24,11 @@ OMPL's path fails those checks, the integrated path is densified and checked the
 For a 2-D disk object (:func:`rolls_on_links`) the sticking contacts on the side of a finger link
 roll (:class:`~planner.manifold.ContactManifold` with ``rolling=True``: the contact point moves by
 ``r`` times the disk's turn relative to the link on both surfaces, exactly), those at a sharp link
-tip and on fixed bodies keep their glued points (exact there); :func:`rolled_contacts` gives the
-contacts where the motion leaves them.
+tip and on fixed bodies keep their glued points (exact there); for a 3-D sphere
+(:func:`rolls_on_planes`) the sticking contacts on a flat face of a fixed body (a table) roll (the
+sphere turns about a fixed axis ``omega`` while its centre moves by ``r omega x n``, exactly), its
+contacts on links stay glued; :func:`rolled_contacts` gives the contacts where the motion leaves
+them.
 """
 
 from __future__ import annotations
@@ -46,7 +49,8 @@ from analysis.geometry import link_shapes, segment_normal_cone, shape_normal_con
 from analysis.kinematics import BodyRef, HandKinematics
 from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
-from analysis.scene import Disk, Scene
+from analysis.rotations import matrix_to_rotvec
+from analysis.scene import Disk, Scene, Sphere
 from planner.budget import CheckBudget
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel
 from planner.ik import joint_limits
@@ -71,9 +75,18 @@ class ObjectMotion:
 
 def rolls_on_links(scene: Scene) -> bool:
     """Do the sticking contacts on a link's side roll in object motions? For a 2-D disk object
-    (:class:`~planner.manifold.ContactManifold` ``rolling=True``); 3-D spheres and cylinders roll
-    non-holonomically, which the planner does not follow (their contacts stay glued)."""
+    (:class:`~planner.manifold.ContactManifold` ``rolling=True``); a 3-D sphere rolls on the flat
+    faces of fixed bodies only (:func:`rolls_on_planes`), its contacts on links stay glued."""
     return scene.dim == 2 and isinstance(scene.object.shape, Disk)
+
+
+def rolls_on_planes(scene: Scene) -> bool:
+    """Do the sticking contacts of a 3-D sphere on the flat faces of fixed bodies (a table) roll in
+    object motions (:class:`~planner.manifold.ContactManifold` ``rolling=True``: the sphere turns
+    about a fixed axis while its centre moves by ``r omega x n``, the contact point moving by ``r``
+    times the turn on the plane and on the sphere)? Always for a sphere with fixed bodies: an F
+    contact on a plane is a rolling one (its glued point would sink the sphere into the plane)."""
+    return scene.dim == 3 and isinstance(scene.object.shape, Sphere) and bool(scene.fixed_bodies)
 
 
 def motion_manifold(scene: Scene, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
@@ -81,9 +94,10 @@ def motion_manifold(scene: Scene, hand: HandKinematics, state: GraspState, stick
                     motion_space: Array | None = None) -> ContactManifold:
     """The contact manifold an object motion from ``state`` follows (and :mod:`planner.verify`
     checks): the sticking contacts glued (eq. 7), rolling on a link's side for a 2-D disk
-    (:func:`rolls_on_links`), the ``sliding`` ones touching (eq. 5)."""
+    (:func:`rolls_on_links`) and on a fixed body's face for a 3-D sphere (:func:`rolls_on_planes`),
+    the ``sliding`` ones touching (eq. 5)."""
     return ContactManifold(hand, state, sticking, sliding, scene, direction=direction, motion_space=motion_space,
-                           rolling=rolls_on_links(scene))
+                           rolling=rolls_on_links(scene) or rolls_on_planes(scene))
 
 
 def rolled_contacts(hand: HandKinematics, scene: Scene, state: GraspState, sticking: Sequence[int], q: Array,
@@ -94,13 +108,18 @@ def rolled_contacts(hand: HandKinematics, scene: Scene, state: GraspState, stick
     new point and inward normal on the disk, :meth:`ContactManifold.rolling_contact`), the others as
     in ``contacts`` (default: ``state.contacts``)."""
     out = list(state.contacts if contacts is None else contacts)
-    if not rolls_on_links(scene) or not sticking:
+    if not (rolls_on_links(scene) or rolls_on_planes(scene)) or not sticking:
         return tuple(out)
     man = motion_manifold(scene, hand, state, sticking)
     x = np.concatenate([np.asarray(q, dtype=float), np.asarray(s, dtype=float)])  # (M + D,)
     for k in range(len(man.rolls)):
         i, y, p_obj, n_obj = man.rolling_contact(k, x)
         ref = man.rolls[k][1]
+        c = out[i]
+        out[i] = GraspContact(c.body, hand.to_local(ref, y, q), p_obj, n_obj, c.mu, c.origin)
+    for k in range(len(man.plane_rolls)):  # a sphere on a plane: the new point on both
+        i, y, p_obj, n_obj = man.plane_rolling_contact(k, x)
+        ref = man.plane_rolls[k][1]
         c = out[i]
         out[i] = GraspContact(c.body, hand.to_local(ref, y, q), p_obj, n_obj, c.mu, c.origin)
     return tuple(out)
@@ -375,7 +394,8 @@ def plan_object_motion(
     ``goal`` (``goal.direction`` in ``goal.motion_space``; else the straight line to its end), the
     validity checker keeps it between the two ends of that path and clear of the fixed bodies, and
     every segment of the densified object path must lie within :data:`MIN_DIRECTION_COSINE` of
-    the direction. Where OMPL finds no path that passes, the integrated path ``goal`` itself is
+    the direction, and a sphere rolling on a plane must not slip along it (:func:`rolling_slip` at
+    most :data:`ROLL_SLIP_TOL`). Where OMPL finds no path that passes, the integrated path ``goal`` itself is
     densified and checked the same way (its ``planner_states`` then 0). ``None`` if neither
     passes."""
     hand = model.hand
@@ -496,6 +516,8 @@ def plan_object_motion(
             return None
         if man.direction is not None and direction_cosines(X[:, M:], man.direction).min() < MIN_DIRECTION_COSINE:
             return None  # a segment of the object path goes back along its line
+        if man.plane_rolls and rolling_slip(man, X[:, M:]) > ROLL_SLIP_TOL:
+            return None  # a sphere rolling on a plane along a path that is not a ray: it slips
         poses = np.array([man.pose(x[M:]).vector() for x in X])  # (k, D)
         length = float(np.sum(np.linalg.norm(np.diff(poses, axis=0), axis=1)))
         return ConstrainedObjectMotion(X[:, :M], poses, X[:, M:], goal.separations, length, residual, step, len(X),
@@ -515,6 +537,32 @@ def plan_object_motion(
                       for q, v in zip(goal.q_path, goal.pose_path, strict=True)])
         out = checked(X, 0)
     return out
+
+
+#: scene units: the largest slip (:func:`rolling_slip`) of a sphere rolling on a plane along a
+#: planned object path (:func:`plan_object_motion` refuses a path that slips more)
+ROLL_SLIP_TOL = 1e-6
+
+
+def rolling_slip(man: ContactManifold, S: Array) -> float:
+    """The slip along the object displacement path ``S`` ``(n, D)`` (the ``s`` of ``man``) of every
+    sphere rolling on a plane (:attr:`ContactManifold.plane_rolls`): per segment ``k`` the
+    sphere's material point at the contact moves by ``dp_k - r omega_k x n`` (``omega_k =
+    log(R_{k+1} R_k^T)``, a constant twist over the segment), zero when it rolls; the largest sum
+    of their lengths over the path among the contacts (0 without such contacts). Rays
+    ``s = t dr`` roll exactly; other paths of the manifold slip at second order (rolling is
+    non-holonomic)."""
+    if not man.plane_rolls or len(S) < 2:
+        return 0.0
+    poses = [man.pose(s) for s in np.asarray(S, dtype=float)]
+    worst = 0.0
+    for _, _, n in man.plane_rolls:
+        total = 0.0
+        for a, b in itertools.pairwise(poses):
+            omega = matrix_to_rotvec(b.rotation @ a.rotation.T)  # (3,)
+            total += float(np.linalg.norm(b.position - a.position - man.radius * np.cross(omega, n)))
+        worst = max(worst, total)
+    return worst
 
 
 #: every segment of an object path lies within this cosine of the analysed direction (issue 11)

@@ -18,7 +18,11 @@ contact point lies on its body and on the object) and:
   every sticking contact on a link's side rolls: at every waypoint the disk touches the link (gap
   zero) and the arc the contact point travelled on the link equals ``r`` times the disk's turn
   relative to the link, and the state after the step has the contact at the rolled point
-  (:func:`_rolling_problems`, from the positions alone); and densely
+  (:func:`_rolling_problems`, from the positions alone); for a 3-D sphere every sticking
+  contact on a fixed body's face rolls: at every waypoint the sphere touches the plane, between
+  waypoints its contact point does not slip, the contact point travels on the plane and on the
+  sphere ``r`` times the rolling turn, and the state after the step has the rolled contact
+  (:func:`_plane_rolling_problems`); and densely
   (waypoints at most ``DENSE_STEP`` apart), at every waypoint, the object penetrates no fixed
   body and no link penetrates the object, a fixed body or another link;
 * every state after a step holds the object (18 for all-F).
@@ -35,15 +39,24 @@ import numpy as np
 from analysis._types import Array
 from analysis.contacts import build_system
 from analysis.exceptions import CTPError
+from analysis.geometry import shape_normal_cone, shape_signed_distance
 from analysis.kinematics import BodyRef, HandKinematics
+from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
-from analysis.scene import Disk, Scene
+from analysis.rotations import matrix_to_rotvec
+from analysis.scene import Disk, Scene, Sphere
 from analysis.torques import torque_set
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel, path_clearance_certified
 from planner.link_release import OVERLAP_SLACK, ROUNDING
 from planner.manifold import pose_displacement
 from planner.motion_length import line_contacts, torque_margin, waypoint_state
-from planner.object_motion import MIN_DIRECTION_COSINE, direction_cosines, motion_manifold, rolls_on_links
+from planner.object_motion import (
+    MIN_DIRECTION_COSINE,
+    direction_cosines,
+    motion_manifold,
+    rolls_on_links,
+    rolls_on_planes,
+)
 from planner.plan import Plan, PlanStep
 from planner.state import GraspState, StateAnalysis, all_f
 
@@ -113,6 +126,7 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
             return [*problems, f"{tag}: no stationary grasp (18) for {t.combination}"]
         problems.extend(_manifold_problems(scene, hand, step, tag))
         problems.extend(_rolling_problems(scene, hand, step, tag))
+        problems.extend(_plane_rolling_problems(scene, hand, step, tag))
         p = before.parts(t.combination)
         oracle = p.oracle()
         assert t.torque_set is not None
@@ -325,6 +339,85 @@ def _rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: s
         y = after.position - r * u1  # (2,) where the disk touches the link at the end
         on_link = hand.point_position(ref, after.contacts[j].point_body, after.q)
         err = max(float(np.linalg.norm(on_link - y)), float(np.linalg.norm(after.world_point(j) - y)))
+        if err > ROLL_TOL:
+            out.append(f"{tag}: the state after the step does not have contact {i} ({c.body}) where it rolled "
+                       f"(off by {err:.3g})")
+    return out
+
+
+def _plane_rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
+    """The rolling kinematics of an object motion of a 3-D sphere (radius ``r``) on the flat face of
+    a fixed body (:func:`~planner.object_motion.rolls_on_planes`), from the waypoints' poses alone
+    (not the planner's manifold), for every sticking contact on such a face (outward normal ``n``,
+    the face's at the contact of the state before the step):
+
+    * the gap, the sphere's signed distance from the body minus ``r``, is zero at every waypoint;
+    * no slip: between consecutive waypoints ``k, k + 1`` the sphere turns by the rotation vector
+      ``omega_k = log(R_{k+1} R_k^T)`` (world) and its centre moves by ``dp_k``; the material point
+      of the sphere at the contact moves by ``dp_k - r omega_k x n`` over a constant twist, which
+      is zero when it rolls; the sum of these slips' lengths over the path is zero;
+    * contact-point travel: the contact point on the plane, ``p - r n``, travels
+      ``sum |dp_k|``, the one on the sphere, ``R_k^T (-r n)`` (object frame), ``r`` times the sum
+      of the angles between consecutive ones, and both equal ``r`` times the sphere's rolling turn
+      ``sum |omega_k - (omega_k . n) n|`` (its spin about ``n`` moves neither);
+    * the state after the step has the contact at the rolled point ``p - r n`` (on the body) and
+      ``R^T (-r n)`` with the inward normal ``R^T n`` (on the sphere).
+
+    All within :data:`ROLL_TOL` (scene units), the travels and the slip summed over the path."""
+    if not rolls_on_planes(scene):
+        return []
+    t = step.transition
+    shape = scene.object.shape
+    assert isinstance(shape, Sphere)  # rolls_on_planes
+    r = float(shape.radius)
+    sliding = {int(i) for i in getattr(t.figures, "sliding_contacts", ())}
+    before, after = step.before, step.after
+    poses = [Pose.from_vector(v, 3) for v in t.object_path]
+    out: list[str] = []
+    for i, ch in enumerate(t.combination):
+        if ch == "D" or i in sliding:
+            continue
+        c = before.contacts[i]
+        ref = hand.resolve_body(c.body)
+        if ref is None or ref.finger is not None:
+            continue
+        body = next(b for b in scene.fixed_bodies if b.name == ref.name)
+        cone = shape_normal_cone(body.shape, before.world_point(i), 3, GEOMETRY_TOL)
+        if cone is None or cone.generators.shape[0] != 1:
+            continue  # an edge or a vertex of the body: glued
+        n = np.asarray(cone.generators[0], dtype=float)
+        n = n / np.linalg.norm(n)
+        gaps = []
+        for pose in poses:
+            sd = shape_signed_distance(body.shape, pose.position, 3)
+            gaps.append(np.inf if sd is None else abs(float(sd) - r))
+        worst_gap = float(np.max(gaps))
+        slip, plane_travel, sphere_travel, turn = 0.0, 0.0, 0.0, 0.0
+        for a, b in itertools.pairwise(poses):
+            omega = matrix_to_rotvec(b.rotation @ a.rotation.T)  # (3,)
+            dp = b.position - a.position  # (3,)
+            slip += float(np.linalg.norm(dp - r * np.cross(omega, n)))
+            plane_travel += float(np.linalg.norm(dp))
+            za, zb = a.rotation.T @ -n, b.rotation.T @ -n  # the contact point on the sphere (unit)
+            sphere_travel += r * float(np.arctan2(np.linalg.norm(np.cross(za, zb)), za @ zb))
+            turn += float(np.linalg.norm(omega - (omega @ n) * n))
+        if worst_gap > ROLL_TOL:
+            out.append(f"{tag}: rolling contact {i} ({c.body}) leaves the plane (gap {worst_gap:.3g})")
+        if slip > ROLL_TOL:
+            out.append(f"{tag}: rolling contact {i} ({c.body}) slips by {slip:.3g} over "
+                       "the path (the sphere's contact point does not stay at rest on the plane)")
+        for name, travel in (("plane", plane_travel), ("sphere", sphere_travel)):
+            if abs(travel - r * turn) > ROLL_TOL:
+                out.append(f"{tag}: rolling contact {i} ({c.body}): the contact point travels {travel:.6g} on the "
+                           f"{name}, not r times the rolling turn {r * turn:.6g}")
+        j = next((j for j, name in enumerate(after.bodies()) if name == c.body), None)
+        if j is None:
+            out.append(f"{tag}: rolling contact {i} ({c.body}) is missing after the step")
+            continue
+        y = after.position - r * n  # (3,) where the sphere touches the plane at the end
+        err = max(float(np.linalg.norm(hand.point_position(ref, after.contacts[j].point_body, after.q) - y)),
+                  float(np.linalg.norm(after.world_point(j) - y)),
+                  r * float(np.linalg.norm(after.world_normal(j) - n)))
         if err > ROLL_TOL:
             out.append(f"{tag}: the state after the step does not have contact {i} ({c.body}) where it rolled "
                        f"(off by {err:.3g})")

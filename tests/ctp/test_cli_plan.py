@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 from analysis.loader import load_scene, scene_from_dict
@@ -162,3 +163,21 @@ def test_ctp_plan_link_replacement_reaches_the_planner(monkeypatch) -> None:  # 
         r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
         assert r.exit_code in (0, 1), r.output
         assert seen[-1] is not None and seen[-1].link_replacement is want
+
+
+@pytest.mark.slow
+def test_ctp_plan_no_sliding_rolls_the_sphere(tmp_path) -> None:  # type: ignore[no-untyped-def]
+    """``--no-sliding`` reaches the planner (PlannerOptions.sliding_motions = False): the sphere of
+    examples/sphere_table_roll.json is rolled 5 cm with no object motion sliding on the table
+    (the default, for a displacement goal, first slides it once: a cheaper plan)."""
+    args = ["plan", str(EXAMPLES / "sphere_table_roll.json"), "--goal", "displacement", "--displacement",
+            "0.05 0 0 0 0 0", "--position-tolerance", "0.005", "--rotation-tolerance", "free"]
+    kinds = {}
+    for flag in ("--no-sliding", "--sliding"):
+        out = tmp_path / f"{flag}.json"
+        r = CliRunner().invoke(app, [*args, flag, "--out", str(out)])
+        assert r.exit_code == 0, r.output
+        steps = json.loads(out.read_text())["steps"]
+        kinds[flag] = [s["combination"] for s in steps if s["kind"] == "object_motion"]
+    assert kinds["--no-sliding"] and all(c == "FF" for c in kinds["--no-sliding"])
+    assert any("S" in c for c in kinds["--sliding"])

@@ -152,12 +152,19 @@ def test_disk_rolls_round_the_end_cap() -> None:
     np.testing.assert_allclose(((R * dbeta - arc) / R + np.pi) % (2 * np.pi) - np.pi, 0.0, atol=1e-9)
 
 
-def test_rolling_needs_a_planar_disk() -> None:
+def test_rolling_needs_a_planar_disk_or_a_sphere() -> None:
+    """Rolling is followed for 2-D disks (on links' sides) and 3-D spheres (on fixed bodies' faces,
+    tests/planner/test_rolling_3d.py): a box refuses it, and a sphere's contact on a finger link
+    keeps its glued point."""
+    box = load_scene(EXAMPLES / "panda_forearm_box.json")
+    hand = HandKinematics.from_scene(box)
+    with pytest.raises(SceneError, match="2-D disk and 3-D sphere"):
+        ContactManifold(hand, state_from_scene(box, hand), [0], scene=box, rolling=True)
     scene = load_scene(EXAMPLES / "sphere_four_finger_palm.json")
     hand = HandKinematics.from_scene(scene)
     st = state_from_scene(scene, hand)
-    with pytest.raises(SceneError, match="2-D disk"):
-        ContactManifold(hand, st, [0], scene=scene, rolling=True)
+    man = ContactManifold(hand, st, [0, 4], scene=scene, rolling=True)  # f1/2 glued, the palm rolls
+    assert len(man.items) == 1 and not man.rolls and [k[0] for k in man.plane_rolls] == [4]
 
 
 def test_planar_plan_object_motion_rolls_on_link_tips(planar_scene: Scene, motion_step: Any) -> None:
