@@ -1,17 +1,17 @@
-"""Request bodies validated outside the event loop.
+"""Request bodies validated outside the event loop (the checks themselves: :mod:`api.body_rules`).
 
 FastAPI validates a declared body model in the event loop before the route runs. The
 scene-taking routes declare their body as ``Annotated[Model, SkipValidation]``: the OpenAPI
 schema is the model's, FastAPI only parses the JSON, and the route checks the parsed body with its
-:class:`BodyRule` (:meth:`BodyRule.check_raw`, the cheap counts that need no model: a 20,000-link
-chain is refused in microseconds) and validates it with :func:`validate_body`, in a worker thread
+:class:`~api.body_rules.BodyRule` (``check_raw``, the cheap counts that need no model: a 20,000-link
+chain is refused in microseconds) and validates it with :func:`~api.body_rules.validate_body`, in a worker thread
 (``await validated(...)`` from an ``async def`` route; a plain ``def`` route already runs in one).
 The thread keeps the scene model's Python validators off the event loop. An invalid body raises
 the same :class:`RequestValidationError` FastAPI would, so its 422 is unchanged (``detail`` names
 the field).
 
 A JSON body over ``inline_body_bytes`` (64 kB; the bundled scenes are under 10 kB) is screened
-first in a light worker (:class:`ScreenedBodyRoute`, :func:`screen_body`): the worker decodes it
+first in a light worker (:class:`ScreenedBodyRoute`, :func:`~api.body_rules.screen_body`): the worker decodes it
 and runs the route's rule, counts and model, and answers with the refusal or "accepted". Decoding
 a megabyte of JSON holds the interpreter about 35 ms, and pydantic's native validation holds it
 too, so in the server a few such bodies at once stalled every other request (``/health`` 0.24-0.32 s
@@ -24,50 +24,21 @@ from __future__ import annotations
 
 import asyncio
 import email.message
-import json
 from collections.abc import Callable, Coroutine
-from dataclasses import dataclass
-from typing import Any, Generic, Literal, TypeVar
+from typing import Any, TypeVar
 
 from fastapi import HTTPException, Request, Response
 from fastapi.exceptions import RequestValidationError
 from fastapi.routing import APIRoute
-from pydantic import BaseModel, ValidationError
+from pydantic import BaseModel
 
 from analysis.exceptions import SceneError
-from analysis.loader import wants_detection, with_detected_contacts
-from analysis.scene import Scene
-from api.deps import check_raw_combination, check_raw_contacts, check_raw_hand_size
-from api.errors import ApiError
+from api.body_rules import RULE_SETTINGS, RULES, validate_body
+from api.exceptions import ApiError
 from api.lanes import use_lane
-from api.schemas import AnalysisCreate, ContactsCreate, EnumerationCreate, GeometryCreate, PlanCreate, _check_files
 from api.settings import Settings
 
 M = TypeVar("M", bound=BaseModel)
-
-
-def validate_body(model: type[M], data: Any) -> M:
-    """``model`` from a parsed JSON body; RequestValidationError (located in ``body``) if invalid.
-
-    A ``scene`` (a :class:`~analysis.scene.Scene` field) whose contacts are omitted, ``[]`` or
-    ``"auto"`` gets the contacts found from its geometry first (:func:`with_detected_contacts`;
-    its SceneError is a 422 naming ``scene.<field>``), once its files passed the HTTP check."""
-    if isinstance(data, model):
-        return data
-    field = model.model_fields.get("scene")
-    scene = data.get("scene") if isinstance(data, dict) else None
-    if field is not None and field.annotation is Scene and wants_detection(scene):
-        try:
-            _check_files(scene)
-        except ValueError:
-            pass  # the model's validation below names the file
-        else:
-            data = {**data, "scene": with_detected_contacts(scene)[0]}
-    try:
-        return model.model_validate(data)
-    except ValidationError as e:
-        errors = [{**err, "loc": ("body", *err["loc"])} for err in e.errors(include_url=False)]
-        raise RequestValidationError(errors) from None
 
 
 async def validated(model: type[M], data: Any) -> M:
@@ -75,85 +46,9 @@ async def validated(model: type[M], data: Any) -> M:
     return await asyncio.to_thread(validate_body, model, data)
 
 
-#: When a route counts the contacts its body lists before the model (413 over ``max_contacts``).
-CountContacts = Literal["never", "always", "without_combination"]
-
-
-@dataclass(frozen=True)
-class BodyRule(Generic[M]):
-    """What a scene-taking route checks on its parsed JSON body, in this order: the joints (413
-    over ``max_joints``), the contacts when the request enumerates every combination (413 over
-    ``max_contacts``), the combination's letters against the contacts listed (422), then the model.
-    The route and the screening worker (:func:`screen_body`) run the same rule."""
-
-    model: type[M]
-    count_contacts: CountContacts = "never"
-    letters: bool = False  # ``combination`` has one letter per listed contact
-
-    def check_raw(self, raw: Any, settings: Settings) -> None:
-        """The counts that need no model (microseconds; ApiError 413/422)."""
-        check_raw_hand_size(raw, settings)
-        if self.count_contacts != "never":
-            enumerate_all = self.count_contacts == "always" or not (isinstance(raw, dict) and raw.get("combination"))
-            check_raw_contacts(raw, settings, enumerate_all=enumerate_all)
-        if self.letters:
-            check_raw_combination(raw)
-
-    def validate(self, raw: Any, settings: Settings) -> M:
-        """:meth:`check_raw`, then :func:`validate_body`."""
-        self.check_raw(raw, settings)
-        return validate_body(self.model, raw)
-
-
-ANALYSIS_BODY = BodyRule(AnalysisCreate, count_contacts="without_combination", letters=True)
-ENUMERATION_BODY = BodyRule(EnumerationCreate, count_contacts="always")
-PLAN_BODY = BodyRule(PlanCreate)
-GEOMETRY_BODY = BodyRule(GeometryCreate)
-CONTACTS_BODY = BodyRule(ContactsCreate)
-
-#: The rule of each route (by its endpoint's name) whose large bodies are screened in a worker.
-RULES: dict[str, BodyRule[Any]] = {
-    "create_analysis": ANALYSIS_BODY,
-    "create_enumeration": ENUMERATION_BODY,
-    "create_plan": PLAN_BODY,
-    "scene_geometry": GEOMETRY_BODY,
-    "scene_contacts": CONTACTS_BODY,
-}
-
-#: The settings a rule reads, sent to the screening worker.
-RULE_SETTINGS = ("max_joints", "max_contacts")
-
-
-def screen_body(rule: str, body: bytes, limits: dict[str, Any]) -> dict[str, Any]:
-    """The worker's half of :class:`ScreenedBodyRoute`: ``body`` decoded as FastAPI decodes JSON
-    and run through ``RULES[rule]`` with ``limits`` (:data:`RULE_SETTINGS`). Returns the outcome as
-    plain data, which :func:`raise_refusal` turns into the route's own answer: ``{"accepted":
-    True}``, or ``"invalid"`` (validation or JSON decode errors, located in ``body``),
-    ``"unreadable"`` (``"recursion"``: nested too deeply; ``"other"``: not UTF-8 and the like),
-    ``"refused"`` (an :class:`ApiError`'s fields), ``"scene"`` (a SceneError's)."""
-    try:
-        data = json.loads(body)
-    except json.JSONDecodeError as e:
-        return {"invalid": [{"type": "json_invalid", "loc": ["body", e.pos], "msg": "JSON decode error"}]}
-    except RecursionError:
-        return {"unreadable": "recursion"}
-    except ValueError:  # UnicodeDecodeError: bytes that are not UTF-8 (or -16, -32)
-        return {"unreadable": "other"}
-    settings = Settings.model_construct(**limits)
-    try:
-        RULES[rule].validate(data, settings)
-    except ApiError as e:
-        return {"refused": {"status": e.status, "detail": e.detail, "limit": e.limit, "errors": e.errors}}
-    except RequestValidationError as e:
-        return {"invalid": [{"type": str(x.get("type", "value_error")), "loc": list(x.get("loc", ())),
-                             "msg": str(x.get("msg", ""))} for x in e.errors()]}
-    except SceneError as e:
-        return {"scene": {"loc": list(e.loc), "reason": e.reason, "errors": e.errors}}
-    return {"accepted": True}
-
-
 def raise_refusal(outcome: dict[str, Any]) -> None:
-    """The exception the route would have raised for the outcome of :func:`screen_body` (none
+    """The exception the route would have raised for the outcome of
+    :func:`~api.body_rules.screen_body` (none
     when accepted): the app's exception handlers give it the same response."""
     if "refused" in outcome:
         r = outcome["refused"]

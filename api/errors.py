@@ -32,20 +32,11 @@ from sqlalchemy.exc import SQLAlchemyError
 from starlette.exceptions import HTTPException
 
 from analysis.exceptions import CTPError, SceneError
+from api.exceptions import ApiError as ApiError  # raised by the routes as api.errors.ApiError
 from api.store import StoreUnavailable, failure_kind
 from api.workers import TaskError, TaskTimeout
 
 log = logging.getLogger("ctp.api")
-
-
-class ApiError(Exception):
-    def __init__(self, status: int, detail: str, *, limit: float | None = None,
-                 errors: list[dict[str, Any]] | None = None):
-        super().__init__(detail)
-        self.status = status
-        self.detail = detail
-        self.limit = limit
-        self.errors = errors or []
 
 
 def not_found(what: str, ident: str) -> ApiError:

@@ -252,8 +252,8 @@ def run_upload(payload: dict[str, Any], progress: Progress | None = None) -> dic
 
 def run_body(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
     """A scene-taking route's large JSON body, decoded and run through the route's rule in a
-    worker (:func:`api.bodies.screen_body`): the refusal or ``{"accepted": True}``."""
-    from api.bodies import screen_body
+    worker (:func:`api.body_rules.screen_body`): the refusal or ``{"accepted": True}``."""
+    from api.body_rules import screen_body
 
     return screen_body(payload["rule"], payload["body"], payload["limits"])
 

@@ -8,7 +8,8 @@ from fastapi import APIRouter, Request
 from fastapi.responses import Response
 from pydantic import SkipValidation
 
-from api.bodies import ANALYSIS_BODY, ScreenedBodyRoute, validated
+from api.bodies import ScreenedBodyRoute, validated
+from api.body_rules import ANALYSIS_BODY, combination_length_error
 from api.cache import BODY_SHA256, answer, cache_key
 from api.deps import (
     AnalysisPoolDep,
@@ -17,7 +18,6 @@ from api.deps import (
     SettingsDep,
     check_hand_size,
     check_scene_size,
-    combination_length_error,
 )
 from api.errors import ApiError
 from api.lanes import analysis_lane, run_in_lane, use_lane

@@ -8,7 +8,8 @@ from typing import Annotated, Any
 from fastapi import APIRouter, Query, Response
 from pydantic import SkipValidation
 
-from api.bodies import ENUMERATION_BODY, ScreenedBodyRoute
+from api.bodies import ScreenedBodyRoute
+from api.body_rules import ENUMERATION_BODY
 from api.deps import RunnerDep, SettingsDep, StoreDep, check_scene
 from api.routes import _jobs
 from api.schemas import AnalysisPublic, EnumerationCreate, EnumerationPublic, ErrorBody, JobList, JobStatus

@@ -8,7 +8,8 @@ from fastapi import APIRouter, Query, Response
 from pydantic import SkipValidation
 
 from analysis.scene import MAX_MAGNITUDE
-from api.bodies import PLAN_BODY, ScreenedBodyRoute
+from api.bodies import ScreenedBodyRoute
+from api.body_rules import PLAN_BODY
 from api.deps import RunnerDep, SettingsDep, StoreDep, check_scene
 from api.errors import ApiError
 from api.routes import _jobs

@@ -10,8 +10,9 @@ from pydantic import SkipValidation
 from analysis.exceptions import SceneError
 from analysis.loader import FILE_ERROR, read_scene_data
 from analysis.scene import Scene
-from api.bodies import CONTACTS_BODY, GEOMETRY_BODY, ScreenedBodyRoute, validated
-from api.deps import AnalysisPoolDep, LightPoolDep, SettingsDep, _hand_size_error, check_hand_size
+from api.bodies import ScreenedBodyRoute, validated
+from api.body_rules import CONTACTS_BODY, GEOMETRY_BODY, hand_size_error
+from api.deps import AnalysisPoolDep, LightPoolDep, SettingsDep, check_hand_size
 from api.errors import ApiError
 from api.lanes import geometry_lane, run_in_lane, upload_lane, use_lane
 from api.schemas import ContactsCreate, ContactsPublic, ErrorBody, ExampleScene, GeometryCreate
@@ -73,7 +74,7 @@ async def upload_scene(file: Annotated[UploadFile, File(description="a scene, .j
         raise ApiError(422, detail, limit=e.limit,
                        errors=[{"loc": ["file"], "msg": detail, "type": "time_limit"}]) from None
     if out["scene"] is None:
-        _hand_size_error(out["joints"], settings)  # 413 naming the limit, before any kinematics
+        hand_size_error(out["joints"], settings)  # 413 naming the limit, before any kinematics
     scene: dict[str, Any] = out["scene"]
     return scene
 

@@ -14,7 +14,7 @@ import pytest
 from fastapi.testclient import TestClient
 from service_helpers import example, settings_for
 
-from api.bodies import screen_body
+from api.body_rules import screen_body
 from api.main import create_app
 from api.workers import ProcessPool
 
