@@ -572,6 +572,9 @@ def plan(
     link_replacement: Annotated[bool, typer.Option(
         help="also lay a link an arm let go of flat on a face of a box object again, the other arms "
              "pinned (whole-arm regrasps)")] = False,
+    contact_slides: Annotated[bool, typer.Option(
+        help="also slide a link's contact along a face of a box object while the other contacts hold it "
+             "still (eq. 33 with an S-point; whole-arm regrasps)")] = False,
     out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
     replay: Annotated[bool, typer.Option(help="replay the whole plan in MuJoCo (one continuous simulation)")] = False,
     posture_rate: Annotated[float, typer.Option(help="--replay: " + POSTURE_HELP)] = POSTURE_RATE,
@@ -619,7 +622,8 @@ def plan(
 
         try:
             result = make_plan(sc, g, progress=step, time_limit=time_limit,
-                               options=PlannerOptions(link_replacement=link_replacement))
+                               options=PlannerOptions(link_replacement=link_replacement,
+                                                      contact_slides=contact_slides))
         except SceneError as e:
             _fail(str(e))
         except CTPError as e:
