@@ -50,7 +50,7 @@ from analysis.regrasp import sliding_equilibrium
 from analysis.scene import Box, Scene
 from planner.collision import DENSE_STEP, path_clearance_certified
 from planner.ik import joint_limits
-from planner.link_replace import FaceTarget, _flat_rows, _inside_face, kept_contacts, transfer_allowance
+from planner.link_replace import _flat_rows, _inside_face, kept_contacts, transfer_allowance
 from planner.nodes import GraphNodes
 from planner.state import GraspContact, GraspState, StateAnalysis, all_f
 from planner.transition import SlideFigures, Transition

@@ -176,7 +176,7 @@ def _slide_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str
     n_obj = -np.asarray(c.normal_object, dtype=float)  # outward, object frame
     ax = int(np.argmax(np.abs(n_obj)))
     plane = centre[ax] + np.sign(n_obj[ax]) * h[ax]
-    gap, outside, k_gap, k_out = 0.0, 0.0, 0, -1
+    gap, k_gap, k_out = 0.0, 0, -1
     for k, q in enumerate(t.q_path):
         p = R.T @ (hand.point_position(ref, c.point_body, q) - b.position)  # (3,) object frame
         g = abs(float(np.sign(n_obj[ax]) * (p[ax] - plane)))
@@ -184,7 +184,7 @@ def _slide_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str
             gap, k_gap = g, k
         off = max(float(abs(p[a] - centre[a]) - h[a]) for a in range(3) if a != ax)
         if off >= 0.0 and k_out < 0:
-            k_out, outside = k, off
+            k_out = k
     if gap > SLIDE_GAP_TOL:
         out.append(f"{tag}: the sliding contact {i} ({c.body}) leaves its face (gap {gap:.3g} at waypoint {k_gap})")
     if k_out >= 0:
@@ -224,9 +224,9 @@ def _slide_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str
         p = sa.parts(t.combination)
         if not sliding_equilibrium(p.system, p.sel, p.st, p.fs, dq):
             return [f"{tag}: at waypoint {k} no equilibrium (33) with the sliding contact's kinetic friction"]
-    j = next((j for j, bb in enumerate(step.after.bodies()) if bb == c.body), None)
+    after = next((j for j, bb in enumerate(step.after.bodies()) if bb == c.body), None)
     end = hand.point_position(ref, c.point_body, t.q_path[-1])
-    if j is None or float(np.linalg.norm(step.after.world_point(j) - end)) > SLIDE_GAP_TOL:
+    if after is None or float(np.linalg.norm(step.after.world_point(after) - end)) > SLIDE_GAP_TOL:
         out.append(f"{tag}: the state after the slide does not have contact {i} ({c.body}) where it slid")
     return out
 

@@ -162,3 +162,23 @@ def test_ctp_plan_link_replacement_reaches_the_planner(monkeypatch) -> None:  # 
         r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
         assert r.exit_code in (0, 1), r.output
         assert seen[-1] is not None and seen[-1].link_replacement is want
+
+
+def test_ctp_plan_contact_slides_reaches_the_planner(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """``--contact-slides`` turns on the planner's slide edges (off without it)."""
+    import planner
+    from planner.options import PlannerOptions
+
+    seen: list[PlannerOptions | None] = []
+    real = planner.plan
+
+    def spy(*args, options=None, **kwargs):  # type: ignore[no-untyped-def]
+        seen.append(options)
+        return real(*args, options=options, max_expansions=1, **kwargs)
+
+    monkeypatch.setattr(planner, "plan", spy)
+    scene = str(Path(__file__).resolve().parents[2] / "examples" / "planar_disk_envelope.json")
+    for flag, want in (([], False), (["--contact-slides"], True)):
+        r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
+        assert r.exit_code in (0, 1), r.output
+        assert seen[-1] is not None and seen[-1].contact_slides is want

@@ -1,0 +1,199 @@
+"""Slides (issue 11 item 2, :mod:`planner.link_slide`): one link's contact slides along a face.
+
+Baxter hugging the box (examples/baxter_hug_box.json) lifts its left forearm off the box (a link
+release, its elbow kept on the box) and slides its elbow's contact along the box's side while the
+right arm and the table hold the box still. Checked independently of the planner's own checks:
+
+* along the path the elbow's body point stays on the face plane (gap) inside the face, and the kept
+  contacts (the other arm, the table) do not move;
+* at waypoints an independent scipy LP (own wrench matrix from the world points and normals,
+  friction pyramids inscribed in the cones at the sticking contacts, the sliding contact's force
+  on its cone's boundary along the link's motion: kinetic friction dragging the object the way the
+  link slides) balances the box's weight;
+* :func:`planner.verify.verify_plan` passes the plan and rejects corrupted slides (the contact
+  lifted off the face, pushed into it, the state after it elsewhere);
+* the plan's JSON reads back to itself, and the MuJoCo replay moves the contact as planned within
+  5 % with the box still.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+from analysis.kinematics import HandKinematics
+from analysis.loader import load_scene
+from analysis.scene import Scene
+from planner import Goal, plan
+from planner.graph import ContactStateGraph
+from planner.link_slide import slid_state
+from planner.options import PlannerOptions
+from planner.plan import Plan, PlanStep
+from planner.state import all_f
+from planner.verify import verify_plan
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+
+
+@pytest.fixture(scope="module")
+def baxter() -> Scene:
+    return load_scene(EXAMPLES / "baxter_hug_box.json")
+
+
+@pytest.fixture(scope="module")
+def slid(baxter: Scene) -> Plan:
+    """The plan that lifts the left forearm off (FDFFFF) with the elbow's slide appended."""
+    p = plan(baxter, Goal(type="combination", combination="FDFFFF"))
+    assert p.found, p.reason
+    hand = HandKinematics.from_scene(baxter)
+    g = ContactStateGraph(baxter, hand, p.goal, PlannerOptions(contact_slides=True))
+    state = p.steps[-1].after
+    g.add(state)
+    edges = g.slide_edges(state)
+    assert edges, g.rejections
+    t, new = edges[0]
+    held = g.analysis(new).stationary(all_f(new))
+    assert held is not None
+    return replace(p, steps=(*p.steps, PlanStep(len(p.steps), t, state, new)), final_contacts=new.bodies(),
+                   final_combination=all_f(new), cost=p.cost + t.cost, final_tau=np.asarray(held.tau))
+
+
+def _face_gap(baxter: Scene, hand: HandKinematics, step: PlanStep, q: np.ndarray) -> float:
+    c = step.before.contacts[step.transition.figures.sliding_contact]  # type: ignore[union-attr]
+    x = hand.point_position(hand.resolve_body(c.body), c.point_body, q)  # type: ignore[arg-type]
+    return float(x[1] - 0.2)  # the box's +y face (y = 0.2), the object not rotated
+
+
+def test_the_elbow_slides_a_few_cm_on_the_face_and_nothing_else_moves(baxter: Scene, slid: Plan) -> None:
+    hand = HandKinematics.from_scene(baxter)
+    step = slid.steps[-1]
+    t = step.transition
+    assert t.kind == "slide" and t.combination == "SFFFF"
+    assert t.figures.body == "left/left_lower_elbow"  # type: ignore[union-attr]
+    d = np.asarray(t.figures.displacement)  # type: ignore[union-attr]
+    assert 0.01 < float(np.linalg.norm(d)) < 0.05 and abs(d[1]) < 1e-9  # cm along the face, none across it
+    for q in t.q_path:
+        assert abs(_face_gap(baxter, hand, step, q)) <= 1e-9
+    right = hand.finger_slice(1)
+    np.testing.assert_array_equal(t.q_path[:, right], np.tile(step.before.q[right], (len(t.q_path), 1)))
+    np.testing.assert_array_equal(t.object_path, np.tile(step.before.pose_vector(), (len(t.q_path), 1)))
+    assert float(np.max(np.abs(np.diff(t.q_path, axis=0)))) <= 1e-3 + 1e-12  # dense
+
+
+def _independent_equilibrium(step: PlanStep, k: int, hand: HandKinematics, w_ex: np.ndarray) -> bool:
+    """scipy LP: F-points in inscribed 8-sided friction pyramids, the S-point's force
+    ``n_s (n + mu v / |v|)``, ``n_s >= 0``, ``v`` the link's slip over the waypoint; sum of wrenches
+    about the object origin plus ``w_ex`` zero."""
+    t = step.transition
+    i = t.figures.sliding_contact  # type: ignore[union-attr]
+    q = t.q_path[k]
+    dq = t.q_path[k + 1] - q
+    state = slid_state(step.before, i, q, hand)
+    o = state.position
+    cols = []
+    rows_ub = []
+    nvar = 0
+    blocks = []
+    for j, c in enumerate(state.contacts):
+        x, n = state.world_point(j), state.world_normal(j)
+        if j == i:
+            ref = hand.resolve_body(c.body)
+            assert ref is not None
+            v = hand.point_jacobian(ref, x, q) @ dq  # (3,) the link's body point moves by v
+            v = v - (v @ n) * n
+            f = n + c.mu * v / np.linalg.norm(v)
+            cols.append(np.r_[f, np.cross(x - o, f)])
+            blocks.append(("s", nvar))
+            nvar += 1
+            continue
+        a = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
+        a /= np.linalg.norm(a)
+        b = np.cross(n, a)
+        start = nvar
+        for e in (n, a, b):  # f = fn n + fa a + fb b
+            cols.append(np.r_[e, np.cross(x - o, e)])
+            nvar += 1
+        for m in range(8):  # inscribed pyramid: (cos, sin) . (fa, fb) <= mu cos(pi/8) fn
+            th = 2 * np.pi * m / 8
+            row = np.zeros(64)
+            row[start], row[start + 1], row[start + 2] = -c.mu * np.cos(np.pi / 8), np.cos(th), np.sin(th)
+            rows_ub.append(row)
+        blocks.append(("f", start))
+    A_eq = np.array(cols).T  # (6, nvar)
+    A_ub = np.array([r[:nvar] for r in rows_ub])
+    bounds = [(None, None)] * nvar
+    for _, s in blocks:
+        bounds[s] = (0.0, None)  # normal components (and n_s) >= 0
+    res = linprog(np.zeros(nvar), A_ub=A_ub, b_ub=np.zeros(len(A_ub)), A_eq=A_eq, b_eq=-w_ex, bounds=bounds,
+                  method="highs")
+    return bool(res.status == 0)
+
+
+def test_the_held_box_is_in_equilibrium_at_the_waypoints_independent_lp(baxter: Scene, slid: Plan) -> None:
+    hand = HandKinematics.from_scene(baxter)
+    step = slid.steps[-1]
+    w_ex = np.asarray(baxter.external_wrench, dtype=float)
+    n = len(step.transition.q_path)
+    for k in sorted({0, n // 4, n // 2, 3 * n // 4, n - 2}):
+        assert _independent_equilibrium(step, k, hand, w_ex), k
+
+
+def test_verify_passes_the_slide_and_rejects_corrupted_ones(baxter: Scene, slid: Plan) -> None:
+    assert verify_plan(baxter, slid) == []
+    step = slid.steps[-1]
+    t = step.transition
+    n = len(t.q_path)
+    for sign in (1.0, -1.0):  # the elbow lifted off the face / pushed into it at the middle waypoints
+        q = t.q_path.copy()
+        q[:, 0] += sign * 2e-4 * np.sin(np.pi * np.arange(n) / (n - 1))  # the left shoulder's yaw, a smooth bump
+        bad = replace(slid, steps=(*slid.steps[:-1], replace(step, transition=replace(t, q_path=q))))
+        problems = verify_plan(baxter, bad)
+        assert any("sliding contact 0" in p and "leaves its face" in p for p in problems), problems
+    moved = [replace(c, point_object=c.point_object + np.array([0.01, 0.0, 0.0])) if c.body == "left/left_lower_elbow"
+             else c for c in step.after.contacts]
+    bad = replace(slid, steps=(*slid.steps[:-1], replace(step, after=replace(step.after, contacts=tuple(moved)))))
+    problems = verify_plan(baxter, bad)  # 1 cm off the link's body point: not where it slid, not on the link
+    assert any(p.startswith("step 1 (slide)") and ("where it slid" in p or "not a valid scene" in p)
+               for p in problems), problems
+
+
+def test_the_slide_round_trips_through_json(baxter: Scene, slid: Plan) -> None:
+    js = slid.to_json()
+    back = Plan.from_json(js, baxter)
+    assert back.to_json() == js
+    assert [s.transition.kind for s in back.steps] == ["release", "slide"]
+    assert verify_plan(baxter, back) == []
+
+
+def test_slides_are_off_by_default(baxter: Scene, slid: Plan) -> None:
+    assert PlannerOptions().contact_slides is False
+    hand = HandKinematics.from_scene(baxter)
+    state = slid.steps[0].after
+    for on in (False, True):
+        g = ContactStateGraph(baxter, hand, Goal(type="active"), PlannerOptions(contact_slides=on))
+        asked: list[bool] = []
+
+        def record(s: object, asked: list[bool] = asked) -> list[object]:
+            asked.append(True)
+            return []
+
+        for name in ("release_edges", "link_release_edges", "object_motion_edges", "contact_edges"):
+            setattr(g, name, lambda *a: [])
+        g.slide_edges = record  # type: ignore[assignment]
+        g.successors(g.add(state))
+        assert asked == ([True] if on else [])
+
+
+def test_the_slide_replays_in_mujoco_within_5_percent(baxter: Scene, slid: Plan) -> None:
+    from sim.plan_replay import simulate_plan
+
+    sim = simulate_plan(baxter, slid)
+    assert not sim.dropped, sim.drop_reason
+    s = sim.steps[-1]
+    assert s.kind == "slide" and s.slide_error is not None
+    assert s.slide_error <= 0.05, s.note
+    assert float(np.linalg.norm(sim.simulated_final_pose[:3] - sim.start_pose[:3])) <= 1e-4  # the box stays
