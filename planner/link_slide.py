@@ -204,8 +204,9 @@ def slide_problems(nodes: GraphNodes, state: GraspState, i: int, path: Array) ->
 
 def slide_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Transition, GraspState]]:
     """Eq. (33) with an S-point: for every finger contact lying flat on a face of a box, slides of
-    ``slide_length`` object sizes both ways along the face's two axes (module docstring), checked;
-    the transitions and the states they lead to."""
+    ``slide_length`` object sizes both ways along the face's two axes (module docstring) and, towards
+    a ``contact`` goal for its body, the slide towards the goal's point (its progress the point's
+    distance in the face's plane), checked; the transitions and the states they lead to."""
     hand, model, options = nodes.hand, nodes.model, nodes.options
     out: list[tuple[Transition, GraspState]] = []
     if not isinstance(nodes.scene.object.shape, Box) or state.dim != 3 or not state.contacts:
@@ -219,40 +220,46 @@ def slide_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Transition, 
         assert frame is not None
         f = ref.finger
         sl = hand.finger_slice(f)
-        for axis in frame[1]:
-            for sign in (1.0, -1.0):
-                with nodes.timings.measure("motion"):
-                    path = slide_path(nodes, state, i, sign * axis, length)
-                if path is None:
-                    nodes.reject("a link cannot slide along the face (kinematics)")
-                    continue
-                new = slid_state(state, i, path[-1], hand)
-                p_obj = new.contacts[i].point_object
-                if not _inside_face(nodes, p_obj):
-                    nodes.reject("a sliding contact would leave its face")
-                    continue
-                if any(np.linalg.norm(p_obj - cc.point_object) <= options.min_contact_spacing * nodes.size
-                       for j, cc in enumerate(state.contacts) if j != i and hand.finger_of(cc.body) is not None):
-                    nodes.reject("a contact would slide next to another contact")
-                    continue
-                kept_refs = [r for cc in state.contacts if (r := hand.resolve_body(cc.body)) is not None
-                             and r.finger == f]
-                with nodes.timings.measure("motion"):
-                    ok, clearance, _ = path_clearance_certified(
-                        model, f, state.q, path[:, sl], state.position, state.rotation, touching_last=kept_refs,
-                        touch_from=0, allowance=transfer_allowance(nodes, state, f))
-                if not ok:
-                    nodes.reject("a sliding link collides")
-                    continue
-                problem, margin = slide_problems(nodes, state, i, path)
-                if problem is not None:
-                    nodes.reject(problem)
-                    continue
-                if nodes.held(new) is None or not nodes.arrives(new):
-                    continue
-                t = _transition(nodes, state, new, i, path, margin, clearance)
-                if t is not None:
-                    out.append((t, new))
+        ways = [(sign * axis, length) for axis in frame[1] for sign in (1.0, -1.0)]
+        goal = nodes.goal
+        if goal.type == "contact" and goal.body == c.body and goal.point is not None:
+            d = np.asarray(goal.point, dtype=float) - state.world_point(i)
+            d -= float(frame[0] @ d) * frame[0]  # in the face's plane
+            if float(np.linalg.norm(d)) > 1e-9 * nodes.size:
+                ways.insert(0, (d / np.linalg.norm(d), float(np.linalg.norm(d))))  # towards the goal's point
+        for u, dist in ways:
+            with nodes.timings.measure("motion"):
+                path = slide_path(nodes, state, i, u, dist)
+            if path is None:
+                nodes.reject("a link cannot slide along the face (kinematics)")
+                continue
+            new = slid_state(state, i, path[-1], hand)
+            p_obj = new.contacts[i].point_object
+            if not _inside_face(nodes, p_obj):
+                nodes.reject("a sliding contact would leave its face")
+                continue
+            if any(np.linalg.norm(p_obj - cc.point_object) <= options.min_contact_spacing * nodes.size
+                   for j, cc in enumerate(state.contacts) if j != i and hand.finger_of(cc.body) is not None):
+                nodes.reject("a contact would slide next to another contact")
+                continue
+            kept_refs = [r for cc in state.contacts if (r := hand.resolve_body(cc.body)) is not None
+                         and r.finger == f]
+            with nodes.timings.measure("motion"):
+                ok, clearance, _ = path_clearance_certified(
+                    model, f, state.q, path[:, sl], state.position, state.rotation, touching_last=kept_refs,
+                    touch_from=0, allowance=transfer_allowance(nodes, state, f))
+            if not ok:
+                nodes.reject("a sliding link collides")
+                continue
+            problem, margin = slide_problems(nodes, state, i, path)
+            if problem is not None:
+                nodes.reject(problem)
+                continue
+            if nodes.held(new) is None or not nodes.arrives(new):
+                continue
+            t = _transition(nodes, state, new, i, path, margin, clearance)
+            if t is not None:
+                out.append((t, new))
     return out
 
 

@@ -349,6 +349,13 @@ def check_goal(scene: Scene, goal: Goal) -> None:
         if len(w) != scene.D:
             raise SceneError(("goal", "wrenches", i), f"must have {scene.D} components")
     check_combination(goal, scene)
+    if goal.type == "contact":
+        assert goal.body is not None and goal.point is not None  # Goal's validator
+        ref = HandKinematics.from_scene(scene).resolve_body(goal.body)
+        if ref is None or ref.finger is None:
+            raise SceneError(("goal", "body"), f"'{goal.body}' is not a finger link of the scene")
+        if len(goal.point) != scene.dim:
+            raise SceneError(("goal", "point"), f"must have {scene.dim} values for a {scene.dim}-D scene")
 
 
 def plan(

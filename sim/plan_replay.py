@@ -468,9 +468,13 @@ class PlanSimulation:
 
     @property
     def ok(self) -> bool:
-        """Not dropped, and the position and the rotation each within ``tolerance`` of the
-        planned displacement (:attr:`error`)."""
-        return (not self.dropped) and len(self.steps) > 0 and self.relative_error <= self.tolerance
+        """Not dropped, the position and the rotation each within ``tolerance`` of the planned
+        displacement (:attr:`error`), and every ``slide``'s contact displacement within ``tolerance``
+        of the planned one (:attr:`StepSimulation.slide_error`; a slide whose link MuJoCo does not
+        find touching the object fails)."""
+        slides = [s.slide_error for s in self.steps if s.kind == "slide"]
+        return (not self.dropped) and len(self.steps) > 0 and self.relative_error <= self.tolerance and all(
+            e is not None and e <= self.tolerance for e in slides)
 
     def to_json(self) -> dict[str, Any]:
         return {

@@ -197,3 +197,45 @@ def test_the_slide_replays_in_mujoco_within_5_percent(baxter: Scene, slid: Plan)
     assert s.kind == "slide" and s.slide_error is not None
     assert s.slide_error <= 0.05, s.note
     assert float(np.linalg.norm(sim.simulated_final_pose[:3] - sim.start_pose[:3])) <= 1e-4  # the box stays
+
+
+def test_contact_goal_fields_and_reach(baxter: Scene, slid: Plan) -> None:
+    """A ``contact`` goal needs a finger link and a world point of the scene's dimension; it is met
+    where that link touches within the tolerance and the grasp holds (18)."""
+    from pydantic import ValidationError
+
+    from analysis.exceptions import SceneError
+    from planner.goals import goal_reached
+    from planner.plan import check_goal
+    from planner.state import StateAnalysis
+
+    with pytest.raises(ValidationError):
+        Goal(type="contact", body="left/left_lower_elbow")
+    with pytest.raises(SceneError):
+        check_goal(baxter, Goal(type="contact", body="table", point=[0.5, 0.2, 1.1]))
+    with pytest.raises(SceneError):
+        check_goal(baxter, Goal(type="contact", body="left/left_lower_elbow", point=[0.5, 0.2]))
+    hand = HandKinematics.from_scene(baxter)
+    step = slid.steps[-1]
+    end = step.after.world_point(0)
+
+    def analyse(s):  # type: ignore[no-untyped-def]
+        return StateAnalysis.of(baxter, s, hand)
+
+    goal = Goal(type="contact", body="left/left_lower_elbow", point=end.tolist(), position_tolerance=1e-3)
+    assert goal_reached(goal, step.after, hand, analyse)
+    assert not goal_reached(goal, step.before, hand, analyse)  # 1.86 cm away before the slide
+
+
+@pytest.mark.slow
+def test_a_contact_goal_is_reached_by_release_and_slide(baxter: Scene, slid: Plan) -> None:
+    """The search (``contact_slides``) finds the plan itself: the forearm's release, then the elbow's
+    slide to the goal's point; it verifies; without slides there is no such plan in 3 expansions."""
+    end = slid.steps[-1].after.world_point(0)
+    goal = Goal(type="contact", body="left/left_lower_elbow", point=end.tolist(), position_tolerance=1e-3)
+    p = plan(baxter, goal, options=PlannerOptions(contact_slides=True), max_expansions=5)
+    assert p.found, p.reason
+    assert [s.transition.kind for s in p.steps] == ["release", "slide"]
+    assert float(np.linalg.norm(p.steps[-1].after.world_point(0) - end)) <= 1e-3
+    assert verify_plan(baxter, p) == []
+    assert not plan(baxter, goal, max_expansions=3).found
