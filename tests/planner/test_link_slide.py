@@ -9,7 +9,9 @@ right arm and the table hold the box still. Checked independently of the planner
 * at waypoints an independent scipy LP (own wrench matrix from the world points and normals,
   friction pyramids inscribed in the cones at the sticking contacts, the sliding contact's force
   on its cone's boundary along the link's motion: kinetic friction dragging the object the way the
-  link slides) balances the box's weight;
+  link slides) balances the box's weight; for seeded random external wrenches the analysis' (33)
+  check lies between that LP with inner and with outer pyramids, and some wrenches are not held
+  (with the friction reversed in the LP the implication fails: checked once by hand);
 * :func:`planner.verify.verify_plan` passes the plan and rejects corrupted slides (the contact
   lifted off the face, pushed into it, the state after it elsewhere);
 * the plan's JSON reads back to itself, and the MuJoCo replay moves the contact as planned within
@@ -84,20 +86,19 @@ def test_the_elbow_slides_a_few_cm_on_the_face_and_nothing_else_moves(baxter: Sc
     assert float(np.max(np.abs(np.diff(t.q_path, axis=0)))) <= 1e-3 + 1e-12  # dense
 
 
-def _independent_equilibrium(step: PlanStep, k: int, hand: HandKinematics, w_ex: np.ndarray) -> bool:
-    """scipy LP: F-points in inscribed 8-sided friction pyramids, the S-point's force
-    ``n_s (n + mu v / |v|)``, ``n_s >= 0``, ``v`` the link's slip over the waypoint; sum of wrenches
-    about the object origin plus ``w_ex`` zero."""
+def _independent_equilibrium(step: PlanStep, k: int, hand: HandKinematics, w_ex: np.ndarray, bound: float) -> bool:
+    """scipy LP: the F-points' forces in 8-sided pyramids ``(cos th, sin th) . t <= bound mu n``
+    (``bound`` 1: circumscribed about the cone; ``cos^2 (pi/8)``: inscribed in every 8-sided
+    pyramid inscribed in it, whatever its rotation), the S-point's force ``n_s (n + mu v / |v|)``,
+    ``n_s >= 0``, ``v`` the link's motion over the waypoint (the friction on the object along it);
+    their wrenches about the object origin plus ``w_ex`` ``(6,)`` zero."""
     t = step.transition
     i = t.figures.sliding_contact  # type: ignore[union-attr]
     q = t.q_path[k]
     dq = t.q_path[k + 1] - q
     state = slid_state(step.before, i, q, hand)
     o = state.position
-    cols = []
-    rows_ub = []
-    nvar = 0
-    blocks = []
+    cols, rows_ub, normals = [], [], []
     for j, c in enumerate(state.contacts):
         x, n = state.world_point(j), state.world_normal(j)
         if j == i:
@@ -106,30 +107,27 @@ def _independent_equilibrium(step: PlanStep, k: int, hand: HandKinematics, w_ex:
             v = hand.point_jacobian(ref, x, q) @ dq  # (3,) the link's body point moves by v
             v = v - (v @ n) * n
             f = n + c.mu * v / np.linalg.norm(v)
+            normals.append(len(cols))
             cols.append(np.r_[f, np.cross(x - o, f)])
-            blocks.append(("s", nvar))
-            nvar += 1
             continue
         a = np.cross(n, [1.0, 0, 0] if abs(n[0]) < 0.9 else [0, 1.0, 0])
         a /= np.linalg.norm(a)
         b = np.cross(n, a)
-        start = nvar
+        start = len(cols)
+        normals.append(start)
         for e in (n, a, b):  # f = fn n + fa a + fb b
             cols.append(np.r_[e, np.cross(x - o, e)])
-            nvar += 1
-        for m in range(8):  # inscribed pyramid: (cos, sin) . (fa, fb) <= mu cos(pi/8) fn
+        for m in range(8):
             th = 2 * np.pi * m / 8
-            row = np.zeros(64)
-            row[start], row[start + 1], row[start + 2] = -c.mu * np.cos(np.pi / 8), np.cos(th), np.sin(th)
-            rows_ub.append(row)
-        blocks.append(("f", start))
-    A_eq = np.array(cols).T  # (6, nvar)
-    A_ub = np.array([r[:nvar] for r in rows_ub])
-    bounds = [(None, None)] * nvar
-    for _, s in blocks:
-        bounds[s] = (0.0, None)  # normal components (and n_s) >= 0
-    res = linprog(np.zeros(nvar), A_ub=A_ub, b_ub=np.zeros(len(A_ub)), A_eq=A_eq, b_eq=-w_ex, bounds=bounds,
-                  method="highs")
+            rows_ub.append((start, -bound * c.mu, np.cos(th), np.sin(th)))
+    nvar = len(cols)
+    A_ub = np.zeros((len(rows_ub), nvar))
+    for r, (start, cn, ca, cb) in enumerate(rows_ub):
+        A_ub[r, start:start + 3] = (cn, ca, cb)
+    bounds = [(0.0, None) if j in normals else (None, None) for j in range(nvar)]
+    res = linprog(np.zeros(nvar), A_ub=A_ub, b_ub=np.zeros(len(A_ub)), A_eq=np.array(cols).T, b_eq=-w_ex,
+                  bounds=bounds, method="highs")
+    assert res.status in (0, 2), res.message  # solved or infeasible, nothing else
     return bool(res.status == 0)
 
 
@@ -139,7 +137,34 @@ def test_the_held_box_is_in_equilibrium_at_the_waypoints_independent_lp(baxter: 
     w_ex = np.asarray(baxter.external_wrench, dtype=float)
     n = len(step.transition.q_path)
     for k in sorted({0, n // 4, n // 2, 3 * n // 4, n - 2}):
-        assert _independent_equilibrium(step, k, hand, w_ex), k
+        assert _independent_equilibrium(step, k, hand, w_ex, np.cos(np.pi / 8) ** 2), k
+
+
+def test_the_analysis_sliding_equilibrium_agrees_with_the_independent_lp(baxter: Scene, slid: Plan) -> None:
+    """For seeded random external wrenches at a middle waypoint: feasible with the inner pyramids
+    => :func:`analysis.regrasp.sliding_equilibrium` (its own 8-sided pyramids, eq. 33) => feasible
+    with the outer ones; and the sample has wrenches of both kinds (the check can fail)."""
+    from analysis.regrasp import sliding_equilibrium
+    from planner.state import StateAnalysis
+
+    hand = HandKinematics.from_scene(baxter)
+    step = slid.steps[-1]
+    t = step.transition
+    k = len(t.q_path) // 2
+    dq = t.q_path[k + 1] - t.q_path[k]
+    state = slid_state(step.before, 0, t.q_path[k], hand)
+    rng = np.random.default_rng(11)
+    seen = set()
+    for _ in range(24):
+        w = np.r_[rng.normal(0.0, 15.0, 3), rng.normal(0.0, 3.0, 3)] + np.asarray(baxter.external_wrench)
+        sc = baxter.model_copy(update={"external_wrench": w.tolist()})
+        p = StateAnalysis.of(sc, state, hand).parts(t.combination)
+        got = sliding_equilibrium(p.system, p.sel, p.st, p.fs, dq)
+        inner = _independent_equilibrium(step, k, hand, w, np.cos(np.pi / 8) ** 2)
+        outer = _independent_equilibrium(step, k, hand, w, 1.0)
+        assert (not inner or got) and (not got or outer), (w, inner, got, outer)
+        seen.add(got)
+    assert seen == {True, False}
 
 
 def test_verify_passes_the_slide_and_rejects_corrupted_ones(baxter: Scene, slid: Plan) -> None:
