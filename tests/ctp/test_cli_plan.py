@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 from analysis.loader import load_scene, scene_from_dict
@@ -182,3 +183,24 @@ def test_ctp_plan_contact_slides_reaches_the_planner(monkeypatch) -> None:  # ty
         r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
         assert r.exit_code in (0, 1), r.output
         assert seen[-1] is not None and seen[-1].contact_slides is want
+
+
+@pytest.mark.slow
+def test_ctp_plan_contact_goal_by_a_slide_and_its_replay(tmp_path: Path) -> None:
+    """``ctp plan --goal contact --body --point --contact-slides`` on Baxter's hug finds the forearm's
+    release and the elbow's slide (exit 0), ``ctp simulate`` of the file replays it within 5 %
+    (exit 0); without ``--contact-slides`` the point is not reached within the same expansions
+    (exit 1)."""
+    scene = str(EXAMPLES / "baxter_hug_box.json")
+    goal = ["--goal", "contact", "--body", "left/left_lower_elbow", "--point", "0.5236 0.2 1.1104",
+            "--position-tolerance", "0.001"]
+    out = tmp_path / "slide.json"
+    r = CliRunner().invoke(app, ["plan", scene, *goal, "--contact-slides", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    data = json.loads(out.read_text())
+    assert [s["kind"] for s in data["steps"]] == ["release", "slide"]
+    assert data["steps"][1]["figures"]["body"] == "left/left_lower_elbow"
+    r = CliRunner().invoke(app, ["simulate", str(out), "--scene", scene])
+    assert r.exit_code == 0 and "slid in" in r.output and "within tolerance" in r.output, r.output
+    r = CliRunner().invoke(app, ["plan", scene, *goal, "--time-limit", "120"])
+    assert r.exit_code == 1 and "no plan" in r.output, r.output
