@@ -72,6 +72,16 @@ def regrasp_cone(
     return RegraspCone(J_d, Lqr, rays, lines, feasible, exact=not sel.s_index)
 
 
+def sliding_equilibrium(
+    system: GraspSystem, sel: Selection, st: Statics, fs: FrictionSet, dq: Array
+) -> bool:
+    """Eq. (33) for one finger motion ``dq`` ``(M,)`` with the object still: whether some ``f_c`` in
+    the friction set ``F`` (16) of the F-points and the S-points' kinetic friction against their
+    slip ``-J_s dq`` (11-12, on the cone boundary, ``n >= 0``) balance the external wrench,
+    ``G_c f_c + w_s = -w_ex`` (one LP; False when an S-point does not slip)."""
+    return _equilibrium_with_sliding(system, sel, st, fs, dq)
+
+
 def _equilibrium_with_sliding(
     system: GraspSystem, sel: Selection, st: Statics, fs: FrictionSet, dq: Array
 ) -> bool:

@@ -555,15 +555,19 @@ def contacts(
 @app.command()
 def plan(
     scene: Annotated[Path, typer.Argument(help="scene file (.json, .yaml)")],
-    goal: Annotated[str, typer.Option(help="active | passive | fingertips | combination | pose | displacement")
+    goal: Annotated[str, typer.Option(help="active | passive | fingertips | combination | pose | displacement | "
+                                           "contact")
                     ] = "active",
     combination: Annotated[str | None, typer.Option(help="goal combination, e.g. FSDD (--goal combination)")] = None,
     pose: Annotated[str | None, typer.Option(help="goal pose: 2-D 'x y theta', 3-D 'x y z rx ry rz'")] = None,
     displacement: Annotated[str | None, typer.Option(
         help="goal displacement from the start pose (push by dx, lift by dz): 2-D 'dx dy dtheta', "
              "3-D 'dx dy dz rx ry rz'")] = None,
+    body: Annotated[str | None, typer.Option(help="contact goal: the finger link that is to touch at --point")] = None,
+    point: Annotated[str | None, typer.Option(help="contact goal: where it is to touch (world): 3-D 'x y z'")] = None,
     position_tolerance: Annotated[float | None, typer.Option(
-        help="pose goal: position tolerance in scene units (metres); default 1 % of the object size")] = None,
+        help="pose or contact goal: position tolerance in scene units (metres); default 1 % of the object "
+             "size")] = None,
     rotation_tolerance: Annotated[str | None, typer.Option(
         help="pose goal: rotation tolerance in radians, or 'free'; default 0.05")] = None,
     tolerance: Annotated[float | None, typer.Option(
@@ -576,6 +580,9 @@ def plan(
         "--sliding/--no-sliding",
         help="object motions in which the contacts on fixed bodies slide (S) while the fingers stick; "
              "default: for pose and displacement goals (--no-sliding: a sphere on a table only rolls)")] = None,
+    contact_slides: Annotated[bool, typer.Option(
+        help="also slide a link's contact along a face of a box object while the other contacts hold it "
+             "still (eq. 33 with an S-point; whole-arm regrasps)")] = False,
     out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
     replay: Annotated[bool, typer.Option(help="replay the whole plan in MuJoCo (one continuous simulation)")] = False,
     posture_rate: Annotated[float, typer.Option(help="--replay: " + POSTURE_HELP)] = POSTURE_RATE,
@@ -584,7 +591,9 @@ def plan(
     """Plan contact-state transitions from the scene's grasp to a goal: active or passive closure,
     fingertip contacts only, a combination (one letter per scene contact: D released, the others
     still touching in that state), an object pose, or a displacement of the object from its start
-    (``--goal displacement --displacement '-0.1 0 0 0 0 0'``: push by 10 cm along -x).
+    (``--goal displacement --displacement '-0.1 0 0 0 0 0'``: push by 10 cm along -x), or a contact
+    of a link at a new place (``--goal contact --body left/left_lower_elbow --point 'x y z'``; with
+    ``--contact-slides`` an arm may slide it there along a face).
 
     Exit codes: 0 a plan was found (or the start already meets the goal; with --replay: and the
     replay met it); 1 no plan was found (the reason is printed); 2 bad input; 3 (--replay) the
@@ -609,7 +618,8 @@ def plan(
                  pose=None if pose is None else [float(x) for x in _parse_vector(pose, "pose")],
                  displacement=None if displacement is None else [
                      float(x) for x in _parse_vector(displacement, "displacement")],
-                 tolerance=tolerance, position_tolerance=position_tolerance, rotation_tolerance=rot)
+                 tolerance=tolerance, position_tolerance=position_tolerance, rotation_tolerance=rot, body=body,
+                 point=None if point is None else [float(x) for x in _parse_vector(point, "point")])
     except ValidationError as e:
         err = e.errors()[0]
         where = ".".join(str(x) for x in err["loc"] if not str(x).startswith(("function-", "literal[")))
@@ -623,7 +633,8 @@ def plan(
 
         try:
             result = make_plan(sc, g, progress=step, time_limit=time_limit,
-                               options=PlannerOptions(link_replacement=link_replacement, sliding_motions=sliding))
+                               options=PlannerOptions(link_replacement=link_replacement, sliding_motions=sliding,
+                                                      contact_slides=contact_slides))
         except SceneError as e:
             _fail(str(e))
         except CTPError as e:

@@ -58,12 +58,16 @@ class Goal(BaseModel):
       :data:`DEFAULT_ROTATION_TOLERANCE`; ``"free"``: any rotation). ``tolerance`` is the older
       single field: when given it is the default of both (scene units and radians), so goals
       written with it keep working (each error is now compared with it on its own, no longer
-      their Euclidean norm).
+      their Euclidean norm);
+    * ``contact``: the finger link ``body`` touches the object at the world point ``point`` (within
+      ``position_tolerance``, default as for a pose) and the contacts hold the object (18): an arm
+      moves its contact to a new place, e.g. by sliding it along a face
+      (:mod:`planner.link_slide`, with ``contact_slides``).
     """
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    type: Literal["active", "passive", "combination", "pose", "fingertips", "displacement"]
+    type: Literal["active", "passive", "combination", "pose", "fingertips", "displacement", "contact"]
     combination: Annotated[str, Field(min_length=1, pattern=r"^[FNSDfnsd]+$")] | None = None
     pose: list[FiniteFloat] | None = None
     displacement: list[FiniteFloat] | None = None
@@ -71,6 +75,8 @@ class Goal(BaseModel):
     position_tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
     rotation_tolerance: Annotated[float, Field(gt=0, allow_inf_nan=False)] | Literal["free"] | None = None
     wrenches: list[list[FiniteFloat]] | None = None
+    body: str | None = None
+    point: list[FiniteFloat] | None = None
 
     @model_validator(mode="after")
     def _fields_for_type(self) -> Goal:
@@ -82,6 +88,8 @@ class Goal(BaseModel):
             raise ValueError("pose must have 3 (2-D: x, y, theta) or 6 (3-D: x, y, z, rotation vector) values")
         if self.type == "displacement" and self.displacement is None:
             raise ValueError("goal type 'displacement' needs the field 'displacement' (e.g. [-0.1, 0, 0, 0, 0, 0])")
+        if self.type == "contact" and (self.body is None or self.point is None):
+            raise ValueError("goal type 'contact' needs the fields 'body' (a finger link) and 'point' (world)")
         if self.displacement is not None and len(self.displacement) not in (3, 6):
             raise ValueError("displacement must have 3 (2-D: dx, dy, dtheta) or 6 (3-D: dx, dy, dz, rotation "
                              "vector) values")
@@ -194,6 +202,25 @@ def combination_reached(goal: Goal, state: GraspState, analysis: Callable[[Grasp
         return False
 
 
+def contact_reached(goal: Goal, state: GraspState, analysis: Callable[[GraspState], StateAnalysis],
+                    size: float | None = None) -> bool:
+    """A contact goal in ``state``: a contact of ``goal.body`` within the position tolerance of
+    ``goal.point`` (world) and a stationary grasp (18) of all the contacts."""
+    assert goal.body is not None and goal.point is not None
+    target = np.asarray(goal.point, dtype=float)
+    near = [i for i, c in enumerate(state.contacts) if c.body == goal.body]
+    if not near:
+        return False
+    if size is None:
+        size = object_size(analysis(state).scene)
+    if min(float(np.linalg.norm(state.world_point(i) - target)) for i in near) > goal.position_tol(size):
+        return False
+    try:
+        return analysis(state).stationary(all_f(state)) is not None
+    except CTPError:
+        return False
+
+
 def is_fingertip(hand: HandKinematics, c: GraspContact) -> bool:
     """A contact near the distal end of the last link of its finger."""
     ref = hand.resolve_body(c.body)
@@ -240,6 +267,8 @@ def goal_reached(goal: Goal, state: GraspState, hand: HandKinematics,
         return analysis(state).stationary(all_f(state)) is not None
     if goal.type == "combination":
         return combination_reached(goal, state, analysis)
+    if goal.type == "contact":
+        return contact_reached(goal, state, analysis, size)
     sa = analysis(state)
     comb = all_f(state)
     if goal.type == "active":

@@ -42,6 +42,12 @@ class PlannerOptions:
     #: contacts held (:mod:`planner.link_replace`); off by default: they add states to every search
     #: on a box (the bundled plans are planned without them)
     link_replacement: bool = False
+    #: edges in which one link's contact slides along a face of a box object while the other
+    #: contacts hold it still (eq. 33 with an S-point, :mod:`planner.link_slide`), ``slide_length``
+    #: object sizes both ways along the face's two axes; off by default: they add states to every
+    #: search on a box (the bundled plans are planned without them)
+    contact_slides: bool = False
+    slide_length: float = 0.05
     #: longest object motion towards a goal pose, and length of a sliding motion (object sizes):
     #: the torque of T is chosen for the start of the motion (first order), so a longer way is
     #: taken in several motions, each re-analysed

@@ -43,8 +43,8 @@ from planner.transition import Transition, figures_from_json
 
 Progress = Callable[[float, str], None]
 
-#: The kinds of plan steps: regrasps (eq. 33) and object motions (eq. 30-32).
-KINDS = ("release", "contact", "object_motion")
+#: The kinds of plan steps: regrasps (eq. 33; ``slide``: with an S-point) and object motions (eq. 30-32).
+KINDS = ("release", "contact", "object_motion", "slide")
 
 #: The reason of a plan whose start already meets the goal (found, no steps).
 START_MEETS_GOAL = "the start already meets the goal: nothing to do (0 steps)"
@@ -176,8 +176,8 @@ class PlanStep:
         tau = None if torques.get("chosen") is None else _array(torques["chosen"], (*loc, "torques", "chosen"), (M,))
         if kind == "object_motion" and tau is None:
             raise SceneError((*loc, "torques", "chosen"), "an object motion needs its chosen torque (32)")
-        if kind == "release" and tau_st is None:
-            raise SceneError((*loc, "torques", "stationary"), "a release needs the stationary torque (18)")
+        if kind in ("release", "slide") and tau_st is None:
+            raise SceneError((*loc, "torques", "stationary"), f"a {kind} needs the stationary torque (18)")
         pts = data.get("contact_points_after")
         points = None if pts is None else _array(pts, (*loc, "contact_points_after"),
                                                  (len(bodies["contacts_after"]), scene.dim))  # (L_after, d)
@@ -349,6 +349,13 @@ def check_goal(scene: Scene, goal: Goal) -> None:
         if len(w) != scene.D:
             raise SceneError(("goal", "wrenches", i), f"must have {scene.D} components")
     check_combination(goal, scene)
+    if goal.type == "contact":
+        assert goal.body is not None and goal.point is not None  # Goal's validator
+        ref = HandKinematics.from_scene(scene).resolve_body(goal.body)
+        if ref is None or ref.finger is None:
+            raise SceneError(("goal", "body"), f"'{goal.body}' is not a finger link of the scene")
+        if len(goal.point) != scene.dim:
+            raise SceneError(("goal", "point"), f"must have {scene.dim} values for a {scene.dim}-D scene")
 
 
 def plan(

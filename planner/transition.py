@@ -74,9 +74,30 @@ class ObjectMotionFigures(_Figures):
     ompl_seconds: float
 
 
-StepFigures = ReleaseFigures | ContactFigures | ObjectMotionFigures
-_FIGURES: dict[str, type[ReleaseFigures] | type[ContactFigures] | type[ObjectMotionFigures]] = {
-    "release": ReleaseFigures, "contact": ContactFigures, "object_motion": ObjectMotionFigures}
+@dataclass(frozen=True)
+class SlideFigures(_Figures):
+    """Eq. (33) with an S-point and ``dr = 0``: one link's contact slides along a face of the object
+    while the other contacts hold it (:mod:`planner.link_slide`)."""
+
+    equation: ClassVar[str] = "33"
+    finger: str
+    body: str  # the link whose contact slides
+    sliding_contact: int  # its index among the contacts
+    start_point: tuple[float, ...]  # (3,) world point of the contact before
+    end_point: tuple[float, ...]  # (3,) and after the slide
+    displacement: tuple[float, ...]  # (3,) end - start, in the face's plane
+    max_gap: float  # largest |gap| of the sliding contact's body point from the face along the path
+    max_kept_drift: float  # largest motion of a kept contact's body point along the path
+    stationary_margin: float  # smallest margin of (18) of the holding contacts over the waypoints
+    waypoints: int
+    joint_path_length: float
+    min_clearance: float  # smallest clearance along the path (the touching links allowed to touch)
+
+
+StepFigures = ReleaseFigures | ContactFigures | ObjectMotionFigures | SlideFigures
+_FIGURES: dict[str, type[ReleaseFigures] | type[ContactFigures] | type[ObjectMotionFigures] | type[SlideFigures]] = {
+    "release": ReleaseFigures, "contact": ContactFigures, "object_motion": ObjectMotionFigures,
+    "slide": SlideFigures}
 
 
 def figures_from_json(kind: str, data: dict[str, Any]) -> StepFigures:
@@ -90,7 +111,7 @@ def figures_from_json(kind: str, data: dict[str, Any]) -> StepFigures:
 class Transition:
     """One edge of the contact-state graph (a step of a plan)."""
 
-    kind: str  # "release" | "contact" | "object_motion"
+    kind: str  # "release" | "contact" | "object_motion" | "slide"
     combination: str  # the combination of the source state's contacts during the step
     contacts_before: tuple[str, ...]
     contacts_after: tuple[str, ...]

@@ -25,6 +25,9 @@ contact point lies on its body and on the object) and:
   (:func:`_plane_rolling_problems`); and densely
   (waypoints at most ``DENSE_STEP`` apart), at every waypoint, the object penetrates no fixed
   body and no link penetrates the object, a fixed body or another link;
+* ``slide`` (33 with one S-point, the object still): densely, the sliding contact's gap and face,
+  the kept contacts, the path's clearance, and at every waypoint the holding contacts' stationary
+  grasp (18) and eq. (33) with the sliding contact's kinetic friction (:func:`_slide_problems`);
 * every state after a step holds the object (18 for all-F).
 
 :func:`verify_plan` returns the list of problems (empty when every step passes).
@@ -43,8 +46,9 @@ from analysis.geometry import shape_normal_cone, shape_signed_distance
 from analysis.kinematics import BodyRef, HandKinematics
 from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
+from analysis.regrasp import sliding_equilibrium
 from analysis.rotations import matrix_to_rotvec
-from analysis.scene import Disk, Scene, Sphere
+from analysis.scene import Box, Disk, Scene, Sphere
 from analysis.torques import torque_set
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel, path_clearance_certified
 from planner.link_release import OVERLAP_SLACK, ROUNDING
@@ -58,7 +62,7 @@ from planner.object_motion import (
     rolls_on_planes,
 )
 from planner.plan import Plan, PlanStep
-from planner.state import GraspState, StateAnalysis, all_f
+from planner.state import GraspContact, GraspState, StateAnalysis, all_f
 
 #: a contact the moving finger keeps during a ``contact`` step may move this much (scene units)
 KEPT_CONTACT_TOL = 1e-6
@@ -120,6 +124,8 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
                                                         [*kept_refs, *new_refs], 0, allow)
             if not ok:
                 problems.append(f"{tag}: finger path collides (clearance {clear:.3g})")
+    elif t.kind == "slide":
+        problems.extend(_slide_problems(scene, hand, step, tag))
     elif t.kind == "object_motion":
         grasp = before.stationary(t.combination)
         if grasp is None:
@@ -146,6 +152,97 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
         problems.extend(_torque_hold_problems(scene, hand, step, tag))
         problems.extend(_penetration_problems(scene, hand, step, tag))
     return problems
+
+
+#: a sliding contact's body point stays this close (scene units) to its face along a slide, and
+#: the state after the slide has the contact at that point within it
+SLIDE_GAP_TOL = 1e-6
+
+
+def _slide_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
+    """A ``slide`` (eq. 33 with one S-point, the object still), densely (every waypoint, at most
+    :data:`DENSE_STEP` apart in every joint): the object does not move; the sliding contact's body
+    point lies on the plane of the face it started on (gap within :data:`SLIDE_GAP_TOL`) and inside
+    that face (the face's normal its only normal); every other contact of a finger stays where it
+    is (:data:`KEPT_CONTACT_TOL`); the finger's path is certified collision-free, its touching links
+    allowed to touch, not to penetrate; at every waypoint the state with the contact where it has
+    slid is a valid scene, the other contacts have a stationary grasp (18) with the sliding contact
+    ``D`` and eq. (33) holds with its kinetic friction against the waypoint's slip; and the state
+    after the step has the contact at the body point's end position."""
+    t = step.transition
+    out: list[str] = []
+    b = step.before
+    slid = [i for i, ch in enumerate(t.combination) if ch == "S"]
+    if len(slid) != 1 or len(t.combination) != b.L:
+        return [f"{tag}: a slide has exactly one S letter, one per contact ({t.combination})"]
+    i = slid[0]
+    c = b.contacts[i]
+    ref = hand.resolve_body(c.body)
+    if ref is None or ref.finger is None or not isinstance(scene.object.shape, Box) or b.dim != 3:
+        return [f"{tag}: only a finger link's contact on a box slides ({c.body})"]
+    if float(np.max(np.abs(t.object_path - b.pose_vector()), initial=0.0)) > CHAIN_TOL:
+        out.append(f"{tag}: the object moves during a slide")
+    if len(t.q_path) > 1 and float(np.max(np.abs(np.diff(t.q_path, axis=0)))) > DENSE_STEP * (1 + 1e-9):
+        out.append(f"{tag}: the path is not dense (more than {DENSE_STEP:g} rad between waypoints)")
+    R = b.rotation[:3, :3]
+    h = np.asarray(scene.object.shape.size, dtype=float) / 2  # (3,)
+    centre = np.asarray(scene.object.shape.position if scene.object.shape.position is not None else np.zeros(3), float)
+    n_obj = -np.asarray(c.normal_object, dtype=float)  # outward, object frame
+    ax = int(np.argmax(np.abs(n_obj)))
+    plane = centre[ax] + np.sign(n_obj[ax]) * h[ax]
+    gap, k_gap, k_out = 0.0, 0, -1
+    for k, q in enumerate(t.q_path):
+        p = R.T @ (hand.point_position(ref, c.point_body, q) - b.position)  # (3,) object frame
+        g = abs(float(np.sign(n_obj[ax]) * (p[ax] - plane)))
+        if g > gap:
+            gap, k_gap = g, k
+        off = max(float(abs(p[a] - centre[a]) - h[a]) for a in range(3) if a != ax)
+        if off >= 0.0 and k_out < 0:
+            k_out = k
+    if gap > SLIDE_GAP_TOL:
+        out.append(f"{tag}: the sliding contact {i} ({c.body}) leaves its face (gap {gap:.3g} at waypoint {k_gap})")
+    if k_out >= 0:
+        out.append(f"{tag}: the sliding contact {i} ({c.body}) leaves its face over an edge (at waypoint {k_out})")
+    for j, cj in enumerate(b.contacts):
+        rj = hand.resolve_body(cj.body)
+        if j == i or rj is None or rj.finger is None:
+            continue
+        drift = max(float(np.linalg.norm(hand.point_position(rj, cj.point_body, q) - b.world_point(j)))
+                    for q in t.q_path)
+        if drift > KEPT_CONTACT_TOL:
+            out.append(f"{tag}: kept contact {j} ({cj.body}) moves by {drift:.3g}")
+    model = CollisionModel.of(scene, hand)
+    f = ref.finger
+    sl = hand.finger_slice(f)
+    touching = [r for cc in b.contacts if (r := hand.resolve_body(cc.body)) is not None and r.finger == f]
+    allow = model.start_allowance(f, b.q, b.position, b.rotation)
+    allow = np.where(allow < 0.0, allow - OVERLAP_SLACK * model.min_radius, allow) - ROUNDING
+    ok, clear, _ = path_clearance_certified(model, f, b.q, t.q_path[:, sl], b.position, b.rotation, touching, 0, allow)
+    if not ok:
+        out.append(f"{tag}: the sliding finger's path collides or penetrates (clearance {clear:.3g})")
+    if out:
+        return out
+    comb_d = t.combination.replace("S", "D")
+    for k, q in enumerate(t.q_path):
+        dq = t.q_path[k + 1] - q if k + 1 < len(t.q_path) else q - t.q_path[k - 1]
+        x = hand.point_position(ref, c.point_body, q)
+        moved = GraspContact(c.body, c.point_body, R.T @ (x - b.position), c.normal_object, c.mu)
+        here = GraspState(tuple(moved if j == i else cc for j, cc in enumerate(b.contacts)), q, b.position,
+                          b.rotation, b.dim)
+        try:
+            sa = StateAnalysis.of(scene, here, hand)
+        except CTPError as e:
+            return [f"{tag}: at waypoint {k} the slid contact is not a valid scene: {e}"]
+        if sa.stationary(comb_d) is None:
+            return [f"{tag}: at waypoint {k} the holding contacts have no stationary grasp (18)"]
+        p = sa.parts(t.combination)
+        if not sliding_equilibrium(p.system, p.sel, p.st, p.fs, dq):
+            return [f"{tag}: at waypoint {k} no equilibrium (33) with the sliding contact's kinetic friction"]
+    after = next((j for j, bb in enumerate(step.after.bodies()) if bb == c.body), None)
+    end = hand.point_position(ref, c.point_body, t.q_path[-1])
+    if after is None or float(np.linalg.norm(step.after.world_point(after) - end)) > SLIDE_GAP_TOL:
+        out.append(f"{tag}: the state after the slide does not have contact {i} ({c.body}) where it slid")
+    return out
 
 
 def _direction_problems(step: PlanStep, direction: Array, tag: str) -> list[str]:

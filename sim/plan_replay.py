@@ -186,6 +186,7 @@ from sim.mjcf import (
     finger_dof_addresses,
     finger_qpos_addresses,
     force_scale,
+    geom_of_contact,
     joint_speed_factor,
     object_pose,
     reset_to_scene,
@@ -369,9 +370,21 @@ class StepSimulation:
     #: N m, the largest torque of the hold servo in the step (``PlanSimulationOptions.hold_rate``;
     #: 0 during object motions, which have none): what the holding torque left to the servo
     hold_servo: float = 0.0
+    #: a ``slide``: the sliding contact's displacement ``(d,)`` as planned (the link's body point) and
+    #: as simulated (MuJoCo's contact point between the link and the object nearest to the planned
+    #: one, end minus start of the slide); None for other steps
+    slide_planned: Array | None = None
+    slide_simulated: Array | None = None
+
+    @property
+    def slide_error(self) -> float | None:
+        """``|simulated - planned| / |planned|`` of a slide's contact displacement (None: not a slide)."""
+        if self.slide_planned is None or self.slide_simulated is None:
+            return None
+        return float(np.linalg.norm(self.slide_simulated - self.slide_planned) / np.linalg.norm(self.slide_planned))
 
     def to_json(self) -> dict[str, Any]:
-        return {
+        out = {
             "index": self.index, "kind": self.kind, "combination": self.combination,
             "driven_finger": self.driven_finger, "planned": self.planned.tolist(),
             "simulated": self.simulated.tolist(), "max_deviation": self.max_deviation,
@@ -379,6 +392,10 @@ class StepSimulation:
             "duration": self.duration, "dropped": self.dropped, "note": self.note,
             "hold_servo": self.hold_servo,
         }
+        if self.slide_planned is not None and self.slide_simulated is not None:
+            out.update(slide_planned=self.slide_planned.tolist(), slide_simulated=self.slide_simulated.tolist(),
+                       slide_error=self.slide_error)
+        return out
 
 
 @dataclass(frozen=True)
@@ -451,9 +468,13 @@ class PlanSimulation:
 
     @property
     def ok(self) -> bool:
-        """Not dropped, and the position and the rotation each within ``tolerance`` of the
-        planned displacement (:attr:`error`)."""
-        return (not self.dropped) and len(self.steps) > 0 and self.relative_error <= self.tolerance
+        """Not dropped, the position and the rotation each within ``tolerance`` of the planned
+        displacement (:attr:`error`), and every ``slide``'s contact displacement within ``tolerance``
+        of the planned one (:attr:`StepSimulation.slide_error`; a slide whose link MuJoCo does not
+        find touching the object fails)."""
+        slides = [s.slide_error for s in self.steps if s.kind == "slide"]
+        return (not self.dropped) and len(self.steps) > 0 and self.relative_error <= self.tolerance and all(
+            e is not None and e <= self.tolerance for e in slides)
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -760,7 +781,8 @@ def simulate_plan(
         run.max_dev, run.track, run.step_index, run.hold_servo = 0.0, 0.0, step.index, 0.0
         run.posture = None  # an object motion sets its own (options.posture_rate)
         if st.kind != "object_motion":  # the contacts the regrasp keeps hold at the planned posture
-            letters = st.combination if st.kind == "release" else "F" * step.before.L  # a release's D lets go
+            letters = {"release": st.combination, "slide": st.combination.replace("S", "D")}.get(
+                st.kind, "F" * step.before.L)  # a release's D lets go, a slide's S is driven
             run.posture = _hold_posture(run, hand, _finger_points(hand, step.before.contacts, letters), st.q_path[0])
         planned = st.object_path[-1] - st.object_path[0]  # (D,)
         busy_before = _fingers_touching(hand, st.contacts_before)
@@ -768,6 +790,7 @@ def simulate_plan(
         all_f = set(range(len(hand.fingers)))
         finger = None if st.kind == "object_motion" else _moving_finger(hand, st)
         note = ""
+        slide: tuple[Array, Array] | None = None
         try:
             if st.kind == "release":
                 tau_st = st.tau_stationary
@@ -816,6 +839,8 @@ def simulate_plan(
                 note = f"moved in {T:.3g} s, " + {"next": "loaded with the next step's tau_st",
                                                   "final": "final grasp's tau_st",
                                                   "none": "torque kept (final grasp not rebuilt)"}[src]
+            elif st.kind == "slide":
+                note, slide = _slide(run, plan, scene, hand, step, nxt)
             else:
                 note = _object_motion(run, plan, scene, hand, step, nxt, pose0)
         except _Drop as e:
@@ -827,6 +852,7 @@ def simulate_plan(
             planned=planned, simulated=run.pose().vector() - pose0.vector(), max_deviation=run.max_dev,
             tracking_error=run.track, joint_error=float(np.max(np.abs(run.q() - st.q_path[-1]))),
             duration=run.t - t0, dropped=dropped, note=note, hold_servo=run.hold_servo,
+            slide_planned=None if slide is None else slide[0], slide_simulated=None if slide is None else slide[1],
         ))
         run.sample()  # the pose this step's simulated displacement ends at
     if not dropped and options.final_hold > 0:
@@ -996,6 +1022,61 @@ def _posture(run: _Run, hand: HandKinematics, step: PlanStep,
         return np.asarray(P @ (gains * (P @ (ref() - q))) - P @ (b_self * (P @ run.data.qvel[run.dadr])))
 
     return torque
+
+
+def _link_contact_point(run: _Run, geom_body: str, near: Array) -> Array | None:
+    """MuJoCo's contact point ``(d,)`` between the object and the link body ``geom_body`` nearest to
+    ``near`` ``(d,)`` (the planned contact point) now (None: they do not touch)."""
+    m, d = run.model, run.data
+    pts = []
+    for j in range(d.ncon):
+        c = d.contact[j]
+        g1, g2 = int(c.geom1), int(c.geom2)
+        if run.obj_geom in (g1, g2):
+            other = g2 if g1 == run.obj_geom else g1
+            if m.body(int(m.geom_bodyid[other])).name == geom_body:
+                pts.append(np.array(c.pos[: run.dim]))
+    if not pts:
+        return None
+    return pts[int(np.argmin([float(np.linalg.norm(p - near)) for p in pts]))]
+
+
+def _slide(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, step: PlanStep,
+           nxt: Transition | None) -> tuple[str, tuple[Array, Array] | None]:
+    """A ``slide`` (eq. 33 with an S-point, :mod:`planner.link_slide`): the torques ramp to the
+    step's ``tau_st`` (18 of the holding contacts, the sliding finger's entries zero: it carries no
+    force), the sliding finger is driven along ``joint_path`` (kinematically, as a free finger: its
+    link keeps the planned zero gap, MuJoCo's soft contact pressing what it will) while the others
+    hold the object, then it becomes torque-controlled again and the torques ramp to the holding
+    torque of the grasp after the step. Returns the note and the planned and simulated contact
+    displacements: the link's body point's, and that of MuJoCo's contact of the link nearest to it
+    (None where MuJoCo has no contact of the link at the start or the end)."""
+    st = step.transition
+    assert st.tau_stationary is not None
+    i = st.combination.index("S")
+    c = step.before.contacts[i]
+    ref = hand.resolve_body(c.body)
+    assert ref is not None and ref.finger is not None
+    driven = _mask(hand, {ref.finger})
+    run.ramp_to(st.tau_stationary, st.object_path[:1], driven, st.q_path[0])
+    name = geom_of_contact(hand, c.body)
+    p0 = hand.point_position(ref, c.point_body, st.q_path[0])
+    p1 = hand.point_position(ref, c.point_body, st.q_path[-1])
+    x0 = _link_contact_point(run, name, p0)
+    T = move_time(st.q_path, driven, run.options.joint_speed, run.options.min_move_time)
+    run.run(T, _constant(st.tau_stationary), st.object_path[:1], driven, driven_profile(st.q_path, driven, run.q(), T))
+    x1 = _link_contact_point(run, name, p1)
+    planned = p1 - p0
+    run.posture = _hold_posture(run, hand, _finger_points(hand, step.after.contacts, "F" * step.after.L),
+                                st.q_path[-1])
+    after_tau, _ = _hold_after(plan, scene, hand, step, nxt)
+    run.ramp_to(st.tau_stationary if after_tau is None else after_tau, st.object_path[-1:], _mask(hand, set()),
+                st.q_path[-1])
+    if x0 is None or x1 is None:
+        return f"slid in {T:.3g} s; MuJoCo has no contact of {c.body} at the {'start' if x0 is None else 'end'}", None
+    err = float(np.linalg.norm((x1 - x0) - planned) / np.linalg.norm(planned))
+    return (f"slid in {T:.3g} s: contact moved {np.linalg.norm(x1 - x0):.4g} (planned {np.linalg.norm(planned):.4g}, "
+            f"error {100 * err:.2f} %)"), (planned, x1 - x0)
 
 
 def _object_motion(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, step: PlanStep,

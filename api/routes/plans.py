@@ -42,10 +42,18 @@ def create_plan(raw: Annotated[PlanCreate, SkipValidation], settings: SettingsDe
                                 f"{body.scene.D}",
                            errors=[{"loc": ["goal", name], "msg": f"needs {body.scene.D} values",
                                     "type": "value_error"}])
+    if body.goal.point is not None and len(body.goal.point) != body.scene.dim:
+        raise ApiError(422, f"goal.point: has {len(body.goal.point)} values; a {body.scene.dim}-D scene needs "
+                            f"{body.scene.dim}",
+                       errors=[{"loc": ["goal", "point"], "msg": f"needs {body.scene.dim} values",
+                                "type": "value_error"}])
     _check_wrenches(body.goal.wrenches, body.scene.D, body.scene.dim)
     limit = _jobs.time_limit(body.time_limit, settings.job_time_limit)
-    request = {"scene": body.scene.model_dump(mode="json"), "goal": body.goal.model_dump(mode="json"),
-               "time_limit": limit}
+    goal = body.goal.model_dump(mode="json")
+    for key in ("body", "point"):  # a contact goal's fields: every other goal keeps its stored form (cache key)
+        if goal[key] is None:
+            del goal[key]
+    request = {"scene": body.scene.model_dump(mode="json"), "goal": goal, "time_limit": limit}
     if body.replay:
         request["replay"] = True  # only when asked: other requests keep their stored form
     job = _jobs.submit(store, runner, KIND, request)

@@ -298,6 +298,11 @@ def test_plan_goal_validation(client: TestClient) -> None:
                                                                "displacement": [0, 0.1, 0, 0, 0, 0]}})
     assert r.status_code == 422 and r.json()["detail"].startswith("goal.displacement:"), r.text
     assert r.json()["errors"][0]["loc"] == ["goal", "displacement"]
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "contact", "body": "left/1"}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("goal:"), r.text  # contact needs body and point
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "contact", "body": "left/1", "point": [0, 0, 0]}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("goal.point:"), r.text
+    assert r.json()["errors"][0]["loc"] == ["goal", "point"]
     r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "displacement"}})
     assert r.status_code == 422 and "displacement" in r.json()["detail"], r.text
     r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}, "time_limit": 1e9})

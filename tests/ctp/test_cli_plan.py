@@ -181,3 +181,44 @@ def test_ctp_plan_no_sliding_rolls_the_sphere(tmp_path) -> None:  # type: ignore
         kinds[flag] = [s["combination"] for s in steps if s["kind"] == "object_motion"]
     assert kinds["--no-sliding"] and all(c == "FF" for c in kinds["--no-sliding"])
     assert any("S" in c for c in kinds["--sliding"])
+
+
+def test_ctp_plan_contact_slides_reaches_the_planner(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """``--contact-slides`` turns on the planner's slide edges (off without it)."""
+    import planner
+    from planner.options import PlannerOptions
+
+    seen: list[PlannerOptions | None] = []
+    real = planner.plan
+
+    def spy(*args, options=None, **kwargs):  # type: ignore[no-untyped-def]
+        seen.append(options)
+        return real(*args, options=options, max_expansions=1, **kwargs)
+
+    monkeypatch.setattr(planner, "plan", spy)
+    scene = str(Path(__file__).resolve().parents[2] / "examples" / "planar_disk_envelope.json")
+    for flag, want in (([], False), (["--contact-slides"], True)):
+        r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
+        assert r.exit_code in (0, 1), r.output
+        assert seen[-1] is not None and seen[-1].contact_slides is want
+
+
+@pytest.mark.slow
+def test_ctp_plan_contact_goal_by_a_slide_and_its_replay(tmp_path: Path) -> None:
+    """``ctp plan --goal contact --body --point --contact-slides`` on Baxter's hug finds the forearm's
+    release and the elbow's slide (exit 0), ``ctp simulate`` of the file replays it within 5 %
+    (exit 0); without ``--contact-slides`` the point is not reached within the same expansions
+    (exit 1)."""
+    scene = str(EXAMPLES / "baxter_hug_box.json")
+    goal = ["--goal", "contact", "--body", "left/left_lower_elbow", "--point", "0.5236 0.2 1.1104",
+            "--position-tolerance", "0.001"]
+    out = tmp_path / "slide.json"
+    r = CliRunner().invoke(app, ["plan", scene, *goal, "--contact-slides", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    data = json.loads(out.read_text())
+    assert [s["kind"] for s in data["steps"]] == ["release", "slide"]
+    assert data["steps"][1]["figures"]["body"] == "left/left_lower_elbow"
+    r = CliRunner().invoke(app, ["simulate", str(out), "--scene", scene])
+    assert r.exit_code == 0 and "slid in" in r.output and "within tolerance" in r.output, r.output
+    r = CliRunner().invoke(app, ["plan", scene, *goal, "--time-limit", "120"])
+    assert r.exit_code == 1 and "no plan" in r.output, r.output
