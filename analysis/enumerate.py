@@ -14,7 +14,10 @@ D = 0 summed), every answer as exact as that of the combination alone:
 * DAFC (:mod:`analysis.dafc_family`): a member of one combination, re-checked, decides the
   combinations that let go of contacts it puts no force on, and its motion is tried, by force LPs
   batched into one HiGHS call, on every combination that lets go of contacts it keeps; the rest get
-  their own search (:func:`analysis.dafc.dafc_nonempty`). Level by level, in worker processes.
+  their own search (:func:`analysis.dafc.dafc_nonempty`), one row of each orbit of the scene's
+  symmetries (:mod:`analysis.symmetry`) first: the images of the members found are tried on the
+  others by the same batched force LPs, which certify them or decide nothing. Level by level, in
+  worker processes.
 """
 
 from __future__ import annotations
@@ -39,11 +42,11 @@ from analysis.dafc_family import (
     MemberCertificate,
     members_at,
     probe_motions,
-    slip_depends_on_redundancy,
 )
 from analysis.exceptions import CombinationError
 from analysis.motion import motion_dims
 from analysis.stationary_table import CLASS, stationary_verdicts
+from analysis.symmetry import symmetries
 
 _OPS: dict[str, Callable[[int, int], bool]] = {
     ">=": lambda a, b: a >= b, "<=": lambda a, b: a <= b, "==": lambda a, b: a == b,
@@ -84,6 +87,7 @@ class EnumerationStats:
     dafc_shared: int = 0  # combinations decided by a re-checked member (motion) of a stronger one
     dafc_batched: int = 0  # of the DAFC LPs, force LPs at a given motion (one HiGHS call a batch)
     dafc_probed: int = 0  # of the shared rows, decided at one of their own canonical probe motions
+    dafc_mirrored: int = 0  # of the shared rows, decided at the image of a member of a symmetric row
 
     @property
     def lps(self) -> int:
@@ -119,13 +123,16 @@ def _shared_dims(system: GraspSystem, kin: FamilyKinematics, rows: list[tuple[st
     :meth:`FamilyKinematics.separating`, else from cdd's generators as :func:`dafc_nonempty`
     computes it; None when it has none), and its exactness (as :func:`dafc_nonempty`: no S-point,
     or ``a_bar = 1`` with slips that do not depend on the redundancy)."""
+    if not rows:
+        return []
+    strict = kin.separates([c for c, _, _ in rows], np.array([m for _, m, _ in rows]))  # (R,)
     out: list[tuple[int | None, bool]] = []
-    for c, motion, a_bar in rows:
+    for (c, _, a_bar), full in zip(rows, strict, strict=True):
         dim: int | None = a_bar
-        if kin.separating(c, motion) is None:
+        if not full:
             dirs = allowable_cone(CombinationParts.build(system, c).ms).all_directions()
             dim = int(np.linalg.matrix_rank(dirs, tol=1e-9)) if dirs.shape[0] else None
-        exact = "S" not in c or (a_bar == 1 and not slip_depends_on_redundancy(system, c))
+        exact = "S" not in c or (a_bar == 1 and not kin.slip_depends(c))
         out.append((dim, exact))
     return out
 
@@ -237,6 +244,7 @@ class _Enumeration:
         self.results: dict[str, CombinationSummary] = {}
         self.stats = EnumerationStats()
         self.kin = FamilyKinematics(system)
+        self.symmetries = symmetries(system)
 
     def _tick(self) -> None:
         if self.progress is not None:
@@ -369,6 +377,7 @@ class _Enumeration:
         self.pending = set(self.dafc_rows)
         self.queue: dict[str, list[Array]] = {}  # queued member motions of stronger combinations
         self.shared: list[str] = []  # decided by a stronger combination's member
+        self.mirrored: set[tuple[str, str]] = set()  # (row, symmetric row) whose member was tried on it
         levels: dict[int, list[str]] = {}
         for c in self.dafc_rows:
             levels.setdefault(sum(CLASS[x] for x in c), []).append(c)
@@ -393,19 +402,76 @@ class _Enumeration:
                             self.queue[c] = self.queue[c][1:]
             todo = [c for c in rows if c not in self.results]
             self._probe(todo, pool)
-            todo = [c for c in todo if c not in self.results]
-            # one search per task: they differ by 100x in cost (a slip-sector search runs up to its
-            # budget), so chunks of several left a worker idle at the end of a level
-            found = (pool.map(_worker_search, todo, chunksize=1)
-                     if pool is not None else (_own_search(self.system, c) for c in todo))
-            for k, (c, out) in enumerate(zip(todo, found, strict=True)):
-                self._commit(c, *out)
-                if k % 64 == 63:
-                    self._tick()
+            self._mirror(rows, pool)
+            # own searches: one row of each orbit of the scene's symmetries first; the images of
+            # their members decide most of the others without a search
+            first, rest = self._representatives([c for c in todo if c not in self.results])
+            self._search(first, pool)
+            self._mirror(rows, pool)
+            self._search([c for c in rest if c not in self.results], pool)
             self._tick()
             if limit is not None and self._reached(limit, rows[-1]):
                 break
         self._finish_shared(pool, workers)
+
+    def _search(self, todo: list[str], pool: ProcessPoolExecutor | None) -> None:
+        """The own searches of ``todo``, committed in its order."""
+        # one search per task: they differ by 100x in cost (a slip-sector search runs up to its
+        # budget), so chunks of several left a worker idle at the end of a level
+        found = (pool.map(_worker_search, todo, chunksize=1)
+                 if pool is not None else (_own_search(self.system, c) for c in todo))
+        for k, (c, out) in enumerate(zip(todo, found, strict=True)):
+            self._commit(c, *out)
+            if k % 64 == 63:
+                self._tick()
+
+    def _representatives(self, todo: list[str]) -> tuple[list[str], list[str]]:
+        """``todo`` split into the first row of each orbit of the scene's symmetries
+        (:func:`analysis.symmetry.symmetries`) and the others, each in ``todo``'s order."""
+        first: list[str] = []
+        rest: list[str] = []
+        seen: set[str] = set()
+        for c in todo:
+            if c in seen:
+                rest.append(c)
+                continue
+            first.append(c)
+            seen.update(g.combination(c) for g in self.symmetries)
+        return first, rest
+
+    def _mirror(self, rows: list[str], pool: ProcessPoolExecutor | None) -> None:
+        """The images of the members of ``rows`` (one level) under the scene's symmetries, tried
+        on the undecided rows they are motions of by the force LPs of :func:`members_at` (which
+        certify them for that row, or decide nothing); a member's certificate is shared as an own
+        search's is. A symmetry maps a level to itself, and the images of an image are images, so
+        one pass decides what the members found so far can."""
+        if not self.symmetries:
+            return
+        pairs: list[tuple[str, Array]] = []
+        targets: set[str] = set()
+        for c in rows:
+            r = self.results.get(c)
+            if r is None or not r.feasible or r.example_motion is None:
+                continue
+            for g in self.symmetries:
+                c2 = g.combination(c)
+                if (c2 in self.pending and c2 not in self.results and c2 not in targets
+                        and (c2, c) not in self.mirrored):
+                    targets.add(c2)
+                    self.mirrored.add((c2, c))
+                    pairs.append((c2, g.motion(r.example_motion)))
+        if not pairs:
+            return
+        batches = [pairs[k:k + BATCH] for k in range(0, len(pairs), BATCH)]
+        outs = pool.map(_worker_batch, batches) if pool is not None else (members_at(self.kin, b) for b in batches)
+        for batch, certs in zip(batches, outs, strict=True):
+            self.stats.dafc_lps += len(batch)
+            self.stats.dafc_batched += len(batch)
+            for (c, motion), cert in zip(batch, certs, strict=True):
+                if cert is not None and c not in self.results:
+                    self._feasible(c, motion)
+                    self.stats.dafc_mirrored += 1
+                    self._share(cert)
 
     def _probe(self, rows: list[str], pool: ProcessPoolExecutor | None) -> None:
         """Canonical motions of ``rows`` (:func:`probe_motions`) tried by batched force LPs before
