@@ -29,6 +29,7 @@ import re
 from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -104,10 +105,24 @@ PARALLEL_THRESHOLD = 2000
 #: Member motions of stronger combinations tried per combination, and force LPs per HiGHS call.
 MOTIONS_PER_ROW = 2
 BATCH = 256
+#: Batches of fewer than ``BATCH`` are split into this many (down to ``MIN_BATCH`` each), so that
+#: the worker processes share a level's few batches; a fixed rule, so the table does not depend
+#: on the number of workers.
+SPLIT = 4
+MIN_BATCH = 16
 #: Combinations per chunk of the batched motion-space dimensions.
 DIMS_CHUNK = 16384
 
 _WORKER: dict[str, object] = {}
+
+_T = TypeVar("_T")
+
+
+def _batches(items: list[_T]) -> list[list[_T]]:
+    """``items`` in batches of at most ``BATCH``, at least ``SPLIT`` of them of ``MIN_BATCH`` or
+    more where there are that many."""
+    size = min(BATCH, max(MIN_BATCH, -(-len(items) // SPLIT)))
+    return [items[k:k + size] for k in range(0, len(items), size)]
 
 
 def _worker_init(system: GraspSystem) -> None:
@@ -266,7 +281,10 @@ class _Enumeration:
         D = sy.D
         a, a_bar = np.zeros(0, dtype=int), np.zeros(0, dtype=int)
         if self.ordered:
-            chunks = [self.ordered[k:k + DIMS_CHUNK] for k in range(0, len(self.ordered), DIMS_CHUNK)]
+            # equal chunks of at most DIMS_CHUNK, at least one per worker process
+            count = max(-(-len(self.ordered) // DIMS_CHUNK), workers if self.pool is not None else 1)
+            size = -(-len(self.ordered) // count)
+            chunks = [self.ordered[k:k + size] for k in range(0, len(self.ordered), size)]
             parts = (self.pool.map(_worker_dims_of, chunks) if self.pool is not None and len(chunks) > 1
                      else (motion_dims(sy, ch) for ch in chunks))
             pairs = list(parts)
@@ -378,6 +396,7 @@ class _Enumeration:
         self.queue: dict[str, list[Array]] = {}  # queued member motions of stronger combinations
         self.shared: list[str] = []  # decided by a stronger combination's member
         self.mirrored: set[tuple[str, str]] = set()  # (row, symmetric row) whose member was tried on it
+        self.mirror_sources: set[str] = set()  # rows whose member's images were tried
         levels: dict[int, list[str]] = {}
         for c in self.dafc_rows:
             levels.setdefault(sum(CLASS[x] for x in c), []).append(c)
@@ -388,7 +407,7 @@ class _Enumeration:
                 todo = [c for c in rows if c not in self.results and self.queue.get(c)]
                 if not todo:
                     break
-                batches = [[(c, self.queue[c][0]) for c in todo[k:k + BATCH]] for k in range(0, len(todo), BATCH)]
+                batches = _batches([(c, self.queue[c][0]) for c in todo])
                 outs = (pool.map(_worker_batch, batches) if pool is not None else
                         (members_at(self.kin, b) for b in batches))
                 for pairs, good in zip(batches, outs, strict=True):
@@ -400,12 +419,15 @@ class _Enumeration:
                             self._share(cert, queue=False)  # its motion is queued below already
                         else:
                             self.queue[c] = self.queue[c][1:]
-            todo = [c for c in rows if c not in self.results]
-            self._probe(todo, pool)
+            # probes and own searches: one row of each orbit of the scene's symmetries first; the
+            # images of their members decide most of the others without probes or a search
             self._mirror(rows, pool)
-            # own searches: one row of each orbit of the scene's symmetries first; the images of
-            # their members decide most of the others without a search
-            first, rest = self._representatives([c for c in todo if c not in self.results])
+            first, rest = self._representatives([c for c in rows if c not in self.results])
+            self._probe(first, pool)
+            self._mirror(rows, pool)
+            self._probe([c for c in rest if c not in self.results], pool)
+            self._mirror(rows, pool)
+            first, rest = self._representatives([c for c in rows if c not in self.results])
             self._search(first, pool)
             self._mirror(rows, pool)
             self._search([c for c in rest if c not in self.results], pool)
@@ -451,8 +473,9 @@ class _Enumeration:
         targets: set[str] = set()
         for c in rows:
             r = self.results.get(c)
-            if r is None or not r.feasible or r.example_motion is None:
+            if r is None or not r.feasible or r.example_motion is None or c in self.mirror_sources:
                 continue
+            self.mirror_sources.add(c)  # its images are decided, not pending, or tried below
             for g in self.symmetries:
                 c2 = g.combination(c)
                 if (c2 in self.pending and c2 not in self.results and c2 not in targets
@@ -462,7 +485,7 @@ class _Enumeration:
                     pairs.append((c2, g.motion(r.example_motion)))
         if not pairs:
             return
-        batches = [pairs[k:k + BATCH] for k in range(0, len(pairs), BATCH)]
+        batches = _batches(pairs)
         outs = pool.map(_worker_batch, batches) if pool is not None else (members_at(self.kin, b) for b in batches)
         for batch, certs in zip(batches, outs, strict=True):
             self.stats.dafc_lps += len(batch)
@@ -476,7 +499,7 @@ class _Enumeration:
     def _probe(self, rows: list[str], pool: ProcessPoolExecutor | None) -> None:
         """Canonical motions of ``rows`` (:func:`probe_motions`) tried by batched force LPs before
         their own searches; a member's certificate is shared as an own search's is."""
-        chunks = [rows[k:k + BATCH] for k in range(0, len(rows), BATCH)]
+        chunks = _batches(rows)
         outs = (pool.map(_worker_probe, chunks) if pool is not None else (_probe(self.kin, ch) for ch in chunks))
         for chunk, (certs, tried) in zip(chunks, outs, strict=True):
             self.stats.dafc_lps += tried

@@ -54,10 +54,18 @@ class Symmetry:
 
     def combination(self, c: str) -> str:
         """The image of the combination ``c``: contact ``perm[i]`` takes the letter of ``i``."""
-        out = [""] * len(c)
-        for i, s in enumerate(c):
-            out[int(self.perm[i])] = s
-        return "".join(out)
+        return "".join(map(c.__getitem__, self._inverse))
+
+    @property
+    def _inverse(self) -> list[int]:
+        """``inv`` with ``perm[inv[k]] = k`` (computed once)."""
+        inv: list[int] | None = self.__dict__.get("_inv")
+        if inv is None:
+            inv = [0] * len(self.perm)
+            for i, k in enumerate(self.perm.tolist()):
+                inv[k] = i
+            object.__setattr__(self, "_inv", inv)
+        return inv
 
     def motion(self, v: Array) -> Array:
         """The image ``T v`` ``(M + D,)`` of a motion ``[dq; dr]``."""
