@@ -113,6 +113,11 @@ MIN_BATCH = 16
 #: Combinations per chunk of the batched motion-space dimensions.
 DIMS_CHUNK = 16384
 
+#: Up to this many contacts the queue of :meth:`_Enumeration._share` is kept by base-3 codes
+#: (a flag per combination: 3^15 bytes, 14 MB).
+OPEN_MAX_CONTACTS = 15
+_CODE = {"F": 0, "S": 1, "N": 1, "D": 2}
+
 _WORKER: dict[str, object] = {}
 
 _T = TypeVar("_T")
@@ -325,6 +330,7 @@ class _Enumeration:
 
     def _commit(self, c: str, summary: CombinationSummary, cert: MemberCertificate | None, lps: int) -> None:
         self.results[c] = summary
+        self._close(c)
         self.stats.dafc_lps += lps
         self.stats.dafc_searched += 1
         if cert is not None:
@@ -342,11 +348,31 @@ class _Enumeration:
                     self._feasible(c, cert.motion)
         if not queue:
             return
-        for c in cert.below():
-            if c in self.pending and c not in self.results:
-                motions = self.queue.setdefault(c, [])
-                if len(motions) < MOTIONS_PER_ROW:
-                    motions.append(cert.motion)
+        if self._open is None:
+            for c in cert.below():
+                if c in self.pending and c not in self.results:
+                    motions = self.queue.setdefault(c, [])
+                    if len(motions) < MOTIONS_PER_ROW:
+                        motions.append(cert.motion)
+            return
+        # the same by base-3 codes: the rows below are the source's code plus the sums of the
+        # non-empty subsets of its kept contacts' steps to D; the open ones take the motion
+        code = [_CODE[x] for x in cert.source]
+        sums = np.zeros(1, dtype=np.int64)
+        for i, k in enumerate(code):
+            if k != 2:
+                sums = np.concatenate([sums, sums + (2 - k) * self._pow3[i]])
+        below = int(np.dot(code, self._pow3)) + sums[1:]
+        for k in below[self._open[below]].tolist():
+            motions = self.queue.setdefault(self._row_of[k], [])
+            motions.append(cert.motion)
+            if len(motions) >= MOTIONS_PER_ROW:
+                self._open[k] = False
+
+    def _close(self, c: str) -> None:
+        """``c`` is decided: no more motions are queued for it."""
+        if self._open is not None:
+            self._open[int(np.dot([_CODE[x] for x in c], self._pow3))] = False
 
     def _feasible(self, c: str, motion: Array) -> None:
         """Record ``c`` as feasible with the member motion ``motion`` (already certified for it);
@@ -355,6 +381,7 @@ class _Enumeration:
         ak, abk = self.dims[c]
         self.results[c] = CombinationSummary(c, True, "feasible", ak, abk, 0, sy.D - abk, False,
                                              motion[sy.M:].copy(), motion)
+        self._close(c)
         self.shared.append(c)
         self.stats.dafc_shared += 1
         self.queue.pop(c, None)
@@ -393,6 +420,16 @@ class _Enumeration:
         strongest-first order), then their own searches; results are committed in that order, so
         the table does not depend on the number of workers."""
         self.pending = set(self.dafc_rows)
+        # the pending rows not decided whose queue is not full, by base-3 code (F 0, S/N 1, D 2)
+        L = self.system.L
+        self._pow3 = 3 ** np.arange(L, dtype=np.int64)
+        self._open: NDArray[np.bool_] | None = None
+        if L <= OPEN_MAX_CONTACTS:
+            codes = (np.array([[_CODE[x] for x in c] for c in self.dafc_rows], dtype=np.int64).reshape(-1, L)
+                     @ self._pow3)
+            self._open = np.zeros(3**L, dtype=bool)
+            self._open[codes] = True
+            self._row_of = dict(zip(codes.tolist(), self.dafc_rows, strict=True))
         self.queue: dict[str, list[Array]] = {}  # queued member motions of stronger combinations
         self.shared: list[str] = []  # decided by a stronger combination's member
         self.mirrored: set[tuple[str, str]] = set()  # (row, symmetric row) whose member was tried on it
