@@ -89,6 +89,7 @@ class EnumerationStats:
     dafc_batched: int = 0  # of the DAFC LPs, force LPs at a given motion (one HiGHS call a batch)
     dafc_probed: int = 0  # of the shared rows, decided at one of their own canonical probe motions
     dafc_mirrored: int = 0  # of the shared rows, decided at the image of a member of a symmetric row
+    dafc_mirrored_empty: int = 0  # rows proven empty as the image of a proven-empty row (symmetric_empty)
 
     @property
     def lps(self) -> int:
@@ -117,6 +118,10 @@ DIMS_CHUNK = 16384
 #: (a flag per combination: 3^15 bytes, 14 MB).
 OPEN_MAX_CONTACTS = 15
 _CODE = {"F": 0, "S": 1, "N": 1, "D": 2}
+#: ``symmetric_empty``: the largest residual of a map (relative mismatch of the mapped data) that
+#: carries a proven emptiness (a 1e-9 perturbation of the contact data changes no verdict that is
+#: not degenerate, issue 9).
+EMPTY_RESIDUAL = 1e-9
 
 _WORKER: dict[str, object] = {}
 
@@ -222,6 +227,7 @@ def enumerate_combinations(
     workers: int | None = None,
     where: Callable[[str], bool] | None = None,
     limit: int | None = None,
+    symmetric_empty: bool = False,
 ) -> tuple[list[CombinationSummary], EnumerationStats]:
     """Summaries of every combination (scene order of letters), strongest-first evaluation.
 
@@ -240,6 +246,13 @@ def enumerate_combinations(
     ``where`` (:func:`parse_where`) keeps only the combinations it accepts; ``limit`` stops after
     that many feasible combinations (strongest first) and returns the rows decided so far, with
     ``stats.stopped_at_limit``. ``progress(done, total)`` is called as combinations are decided.
+    ``symmetric_empty``: a row whose own search proved DAFC empty (exact) decides the rows of its
+    orbit under the scene's symmetries whose data the map carries onto theirs to within
+    ``EMPTY_RESIDUAL`` (:attr:`analysis.symmetry.Symmetry.residual`: points, normals, rows of
+    ``A``, ``w_ex`` and the friction pyramids), without a search of their own: DAFC of the image
+    is the image of DAFC (a member ``(v, f)`` of one maps to the member ``(T v, R f)`` of the
+    other), so it is empty too. Off by default: this carries a verdict, not a certificate that
+    the image row re-checks.
     """
     letters = ["FSD" if m > 0 else "ND" for m in system.mu]
     canonical = ["".join(p) for p in itertools.product(*letters)] if combinations is None else list(combinations)
@@ -250,7 +263,9 @@ def enumerate_combinations(
     if workers is None:
         workers = (os.cpu_count() or 1) if len(canonical) > PARALLEL_THRESHOLD else 1
     ordered = _order(dict.fromkeys(canonical))
-    results, stats = _Enumeration(system, ordered, admissible, progress).run(workers, limit)
+    enum = _Enumeration(system, ordered, admissible, progress)
+    enum.symmetric_empty = symmetric_empty
+    results, stats = enum.run(workers, limit)
     stats.combinations = len(canonical)
     return [results[c] for c in canonical if c in results], stats
 
@@ -265,6 +280,7 @@ class _Enumeration:
         self.stats = EnumerationStats()
         self.kin = FamilyKinematics(system)
         self.symmetries = symmetries(system)
+        self.symmetric_empty = False
 
     def _tick(self) -> None:
         if self.progress is not None:
@@ -467,6 +483,8 @@ class _Enumeration:
             first, rest = self._representatives([c for c in rows if c not in self.results])
             self._search(first, pool)
             self._mirror(rows, pool)
+            if self.symmetric_empty:
+                self._mirror_empty(first)
             self._search([c for c in rest if c not in self.results], pool)
             self._tick()
             if limit is not None and self._reached(limit, rows[-1]):
@@ -532,6 +550,23 @@ class _Enumeration:
                     self._feasible(c, motion)
                     self.stats.dafc_mirrored += 1
                     self._share(cert)
+
+    def _mirror_empty(self, rows: list[str]) -> None:
+        """``symmetric_empty``: the undecided images of the rows of ``rows`` proven empty (exact,
+        reason "DAFC is empty"), under the maps whose residual is at most ``EMPTY_RESIDUAL``, are
+        empty with the same reason and exactness (:func:`enumerate_combinations`)."""
+        for c in rows:
+            r = self.results.get(c)
+            if r is None or r.feasible or not r.exact or r.reason != "DAFC is empty":
+                continue
+            for g in self.symmetries:
+                c2 = g.combination(c)
+                if g.residual > EMPTY_RESIDUAL or c2 not in self.pending or c2 in self.results:
+                    continue
+                ak, abk = self.dims[c2]
+                self.results[c2] = CombinationSummary(c2, False, r.reason, ak, abk, 0, r.dim_dpfc, True, None)
+                self._close(c2)
+                self.stats.dafc_mirrored_empty += 1
 
     def _probe(self, rows: list[str], pool: ProcessPoolExecutor | None) -> None:
         """Canonical motions of ``rows`` (:func:`probe_motions`) tried by batched force LPs before

@@ -51,6 +51,10 @@ class Symmetry:
     perm: NDArray[np.intp]  # (L,) contact i goes to contact perm[i]
     R: Array  # (d, d) orthogonal map of the world frame
     T: Array  # (M + D, M + D) map of the motions [dq; dr]
+    #: the largest relative mismatch of the mapped data (points, normals, rows of A, w_ex) and of
+    #: the friction pyramids' generators (:attr:`GraspSystem.pyramid`, turned by ``R``, against
+    #: those of the image contacts; inf where they do not match at all)
+    residual: float = 0.0
 
     def combination(self, c: str) -> str:
         """The image of the combination ``c``: contact ``perm[i]`` takes the letter of ``i``."""
@@ -213,6 +217,17 @@ def _complete(sy: GraspSystem, R: Array, r: Array, ell: float) -> Symmetry | Non
     A = np.array([sy.contact_A(i) for i in range(L)])  # (L, d, M + D)
     lhs = A[perm] @ T  # (L, d, M + D)
     rhs = np.einsum("ab,lbn->lan", R, A)
-    if float(np.max(np.abs(lhs - rhs), initial=0.0)) > TOL * max(scale, ell):
+    res_A = float(np.max(np.abs(lhs - rhs), initial=0.0)) / max(scale, ell)
+    if res_A > TOL:
         return None
-    return Symmetry(perm, R, T)
+    res = max(res_A, float(np.max(np.abs(r @ R.T - r[perm]))) / ell,
+              float(np.max(np.abs(sy.normals @ R.T - sy.normals[perm]))),
+              float(np.linalg.norm(Tr @ w - w)) / max(float(np.linalg.norm(w)), 1e-300))
+    gens = sy.pyramid[1]  # (L, k, d)
+    for i in range(L):
+        turned_g = gens[i] @ R.T  # (k, d)
+        dist = np.linalg.norm(turned_g[:, None, :] - gens[int(perm[i])][None, :, :], axis=2)  # (k, k)
+        size = max(float(np.max(np.linalg.norm(gens[i], axis=1), initial=0.0)), 1e-300)
+        res = max(res, float(np.max(dist.min(axis=1), initial=0.0)) / size,
+                  float(np.max(dist.min(axis=0), initial=0.0)) / size)
+    return Symmetry(perm, R, T, res)

@@ -14,6 +14,7 @@ from independent_dafc import check_member
 
 import analysis.enumerate as enumerate_module
 from analysis.combination import CombinationParts, summarize_with_member
+from analysis.contacts import system_from_arrays
 from analysis.dafc_family import FamilyKinematics, members_at, slip_depends_on_redundancy
 from analysis.enumerate import enumerate_combinations
 from analysis.symmetry import Symmetry, symmetries, twist_map
@@ -133,3 +134,48 @@ def test_slip_depends_group_by_group(name: str) -> None:
     got = [kin.slip_depends(c) for c in combos]
     assert got == [slip_depends_on_redundancy(sy, c) for c in combos]
     assert any(got) and not all(got)
+
+
+@pytest.mark.parametrize("name", ["planar_disk_envelope", "baxter_hug_box"])
+def test_emptiness_carried_by_symmetries_is_each_rows_own_verdict(name: str) -> None:
+    """symmetric_empty=True: rows decided empty as the image of a proven-empty row under a map
+    whose data residual is at most 1e-9 have the verdict, reason, dimensions and exactness of
+    their own search (the table without the option), and some rows were decided that way."""
+    sy = example_system(name)
+    carried, st = enumerate_combinations(sy, workers=1, symmetric_empty=True)
+    own, st0 = enumerate_combinations(sy, workers=1)
+    assert st.dafc_mirrored_empty > 0 and st0.dafc_mirrored_empty == 0
+    assert st.dafc_searched + st.dafc_mirrored_empty <= st0.dafc_searched
+    assert all(g.residual <= 1e-9 for g in symmetries(sy))
+    key = [(r.combination, r.feasible, r.reason, r.a, r.a_bar, r.dim_dafc, r.dim_dpfc, r.exact) for r in carried]
+    assert key == [(r.combination, r.feasible, r.reason, r.a, r.a_bar, r.dim_dafc, r.dim_dpfc, r.exact) for r in own]
+
+
+@pytest.mark.slow
+def test_emptiness_carried_by_symmetries_on_the_wrap() -> None:
+    """The same on the nine-contact wrap (19,683 rows, about 240 carried)."""
+    sy = example_system("sphere_four_finger_wrap")
+    carried, st = enumerate_combinations(sy, workers=1, symmetric_empty=True)
+    own, _ = enumerate_combinations(sy, workers=1)
+    assert st.dafc_mirrored_empty > 100
+    assert [(r.combination, r.feasible, r.reason, r.dim_dafc, r.exact) for r in carried] == [
+        (r.combination, r.feasible, r.reason, r.dim_dafc, r.exact) for r in own]
+
+
+def test_a_broken_symmetry_carries_motions_but_no_emptiness() -> None:
+    """A contact normal of the planar envelope turned by 1e-7 rad: the mirror is still found
+    (member motions are re-certified anyway), with a residual above 1e-9, so no emptiness is
+    carried; turned by 1e-3 rad, no map is found."""
+    base = example_system("planar_disk_envelope")
+    for angle, found in ((1e-7, True), (1e-3, False)):
+        c, s = np.cos(angle), np.sin(angle)
+        normals = base.normals.copy()
+        normals[0] = np.array([[c, -s], [s, c]]) @ normals[0]
+        sy = system_from_arrays(base.points, normals, base.p_o, base.J_blocks, base.mu, base.w_ex, base.q,
+                                base.bodies, base.friction_sides, base.contact_names, base.object_size)
+        gs = symmetries(sy)
+        assert bool(gs) == found
+        if found:
+            assert all(1e-9 < g.residual <= 1e-6 for g in gs)
+            _, st = enumerate_combinations(sy, workers=1, symmetric_empty=True)
+            assert st.dafc_mirrored_empty == 0
