@@ -179,3 +179,22 @@ def test_a_broken_symmetry_carries_motions_but_no_emptiness() -> None:
             assert all(1e-9 < g.residual <= 1e-6 for g in gs)
             _, st = enumerate_combinations(sy, workers=1, symmetric_empty=True)
             assert st.dafc_mirrored_empty == 0
+
+
+@pytest.mark.parametrize(("row", "mate"), [("DSSSSFDSSSFF", "DSSSFFDSSSSF"), ("DDSSSFDSSSFF", "DDSSFFDSSSSF")])
+def test_unproven_twelve_contact_rows_are_members_at_their_mirrors_member(row: str, mate: str) -> None:
+    """Two rows of the 12-contact wrap whose own slip-sector search leaves boxes open ("DAFC is
+    empty; not proven", exact False, before the member images) are the mirror images of feasible
+    rows: the image of the mate's member motion is certified for the row by members_at and is a
+    member for the independent scipy LP, so the table now calls them feasible (4 such rows in
+    the full list: 287,196 -> 287,200 feasible)."""
+    sy = example_system("sphere_wrap_three_link")
+    data = json.loads((EXAMPLES / "sphere_wrap_three_link.json").read_text())
+    summary, _ = summarize_with_member(CombinationParts.build(sy, mate), stationary_known=True, realisable=False)
+    assert summary.feasible and summary.example_motion is not None
+    maps = [g for g in symmetries(sy) if g.combination(mate) == row]
+    assert maps
+    v = maps[0].motion(summary.example_motion)
+    assert members_at(FamilyKinematics(sy), [(row, v)])[0] is not None
+    ind = check_member(data, row, v[: sy.M], v[sy.M:])
+    assert ind.member, (ind.motion_errors, ind.work, ind.work_min)
