@@ -41,7 +41,7 @@ from analysis.contacts import GraspSystem
 #: columns and the external wrench relative to their sizes).
 TOL = 1e-6
 #: Above this many contacts, no search for symmetries (the anchor pairs grow as ``L^2``).
-MAX_CONTACTS = 64
+MAX_CONTACTS = 32
 
 
 @dataclass(frozen=True)
