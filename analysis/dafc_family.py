@@ -57,6 +57,8 @@ STRICT_TOL = 1e-9
 #: clearly zero (rounding); between it and ``1e3 NULL_ROW_TOL`` it is too close to the threshold of
 #: :attr:`analysis.motion.MotionSpace.B` to be decided here.
 ZERO_ROW = 1e-12
+#: Rows per batch of :meth:`FamilyKinematics.separates` (batched SVDs).
+CHUNK = 4096
 
 
 @dataclass(frozen=True)
@@ -218,6 +220,137 @@ class FamilyKinematics:
         self.groups = system.joint_groups()
         self.M = M
         self._cache: dict[tuple[int, str, tuple[int, ...]], Array | None] = {}
+        self._slip_cache: dict[tuple[int, str], bool] = {}
+
+    def slip_depends(self, combination: str) -> bool:
+        """:func:`slip_depends_on_redundancy` group by group: ``null(J_c)`` is the direct sum of
+        the groups' null spaces (their joints are disjoint), so ``J_s null(J_c)`` is non-zero
+        exactly where the S-points of some group move on the null space of that group's own rows;
+        each group's answer is kept per letters of its contacts."""
+        sy = self.system
+        for g, (C, Q) in enumerate(self.groups):
+            letters = "".join(combination[i] for i in C)
+            if "S" not in letters or not Q:
+                continue
+            key = (g, letters)
+            hit = self._slip_cache.get(key)
+            if hit is None:
+                rows: list[Array] = []
+                for i, s in zip(C, letters, strict=True):
+                    J = sy.J_blocks[i][:, Q]  # (d, |Q|)
+                    if s == "F":
+                        rows.extend(J)
+                    elif s in "SN":
+                        rows.append(sy.normals[i] @ J)
+                Z = null_space(np.array(rows)) if rows else np.eye(len(Q))  # (|Q|, r)
+                J_s = np.vstack([sy.J_blocks[i][:, Q] for i, s in zip(C, letters, strict=True) if s == "S"])
+                hit = bool(Z.shape[1] and np.abs(J_s @ Z).max() > 1e-9)
+                self._slip_cache[key] = hit
+            if hit:
+                return True
+        return False
+
+    def separates(self, combinations: list[str], motions: Array) -> NDArray[np.bool_]:
+        """``separating(c, v) is not None`` for each combination and motion ``(R, M + D)`` (each
+        of that combination's motion space): the redundancy push of the groups (:meth:`separating`'s
+        first step) decided for all rows at once, the rows it does not decide by
+        :meth:`separating` one by one."""
+        sy = self.system
+        R, L = len(combinations), sy.L
+        if R == 0:
+            return np.zeros(0, dtype=bool)
+        code = {"F": 0, "S": 1, "N": 1, "D": 2}
+        letters = np.array([[code[s] for s in c] for c in combinations], dtype=np.intp).reshape(R, L)
+        is_d = letters == 2  # (R, L)
+        size = np.linalg.norm(motions, axis=1)  # (R,)
+        vals = motions @ self.normal_rows.T  # (R, L) normal velocities
+        stuck = is_d & (vals >= -STRICT_TOL * size[:, None])  # (R, L)
+        done = ~stuck.any(axis=1)  # every D-point separates strictly already
+        delta = np.zeros_like(motions)  # (R, M + D)
+        by_groups = np.ones(R, dtype=bool)
+        for g, (C, Q) in enumerate(self.groups):
+            k = len(C)
+            mine = stuck[:, C]  # (R, k)
+            has = mine.any(axis=1)
+            if not has.any():
+                continue
+            if not Q:
+                by_groups &= ~has  # a fixed-body D-point that does not separate: one by one
+                continue
+            key = (letters[:, C] @ (3 ** np.arange(k))) * (1 << k) + mine @ (1 << np.arange(k))  # (R,)
+            for val in np.unique(key[has]):
+                rows_g = np.flatnonzero(has & (key == val))
+                r0 = int(rows_g[0])
+                dg = self._group_delta(g, "".join("FSD"[int(x)] for x in letters[r0, C]),
+                                       tuple(i for i, m in zip(C, mine[r0], strict=True) if m))
+                if dg is None:
+                    by_groups[rows_g] = False
+                else:
+                    delta[rows_g, : sy.M] += dg
+        out = done.copy()
+        live = ~done & by_groups
+        nd = np.linalg.norm(delta, axis=1)  # (R,)
+        live &= nd > 0.0
+        for t in (1e-3, 1e-2, 1e-1, 1.0):
+            idx = np.flatnonzero(live & ~out)
+            if not idx.size:
+                break
+            v2 = motions[idx] + (t * size[idx] / nd[idx])[:, None] * delta[idx]  # (r, M + D)
+            val2 = v2 @ self.normal_rows.T  # (r, L)
+            ok = np.all((val2 < -STRICT_TOL * np.linalg.norm(v2, axis=1)[:, None]) | ~is_d[idx], axis=1)
+            out[idx[ok]] = True
+        rest = np.flatnonzero(~out)
+        for k in range(0, rest.size, CHUNK):
+            idx = rest[k:k + CHUNK]
+            out[idx] = self._separates_whole(letters[idx], motions[idx], stuck[idx], size[idx])
+        return out
+
+    def _separates_whole(self, letters: Array, motions: Array, stuck: Array, size: Array) -> NDArray[np.bool_]:
+        """:meth:`separating`'s second step for rows ``(R, L)`` of letter codes (F 0, S/N 1, D 2),
+        their motions ``(R, M + D)``, the D-points they do not separate strictly ``(R, L)`` and the
+        motions' sizes: the least-norm motion of the whole motion space ``null(A_c)`` that moves
+        every stuck D-point away at unit normal speed (where its row on that space is clearly not
+        zero; undecided, False, near the threshold of a zero row), added by :func:`_strict`'s steps;
+        batched SVDs of the zero-padded ``A_c`` and pseudo-inverses of the padded push rows."""
+        sy = self.system
+        R, L = letters.shape
+        d, n = sy.d, sy.M + sy.D
+        blocks = np.zeros((L, 3, d, n))
+        blocks[:, 0] = self.A
+        blocks[:, 1, 0] = self.normal_rows
+        mats = blocks[np.arange(L)[None, :], letters].reshape(R, L * d, n)  # (R, L d, n) zero-padded A_c
+        _, s1, Vt = np.linalg.svd(mats, full_matrices=True)  # Vt (R, n, n)
+        rank = np.sum(s1 > RANK_RTOL * np.maximum(1.0, s1[:, :1]), axis=1)  # (R,)
+        null_cols = np.arange(n)[None, :] >= rank[:, None]  # (R, n) rows of Vt spanning null(A_c)
+        a = n - rank  # (R,)
+        Rall = np.einsum("ln,rjn->rlj", self.normal_rows, Vt) * null_cols[:, None, :]  # (R, L, n)
+        size_R = np.linalg.norm(Rall, axis=2)  # (R, L)
+        ok = ~np.any(stuck & (size_R > ZERO_ROW) & (size_R < 1e3 * NULL_ROW_TOL), axis=1)
+        live = stuck & (size_R >= 1e3 * NULL_ROW_TOL)  # (R, L)
+        k = live.sum(axis=1)  # (R,)
+        Rp = Rall * live[:, :, None]  # (R, L, n) the push rows, zero elsewhere
+        U, sv, Wt = np.linalg.svd(Rp, full_matrices=False)  # (R, L, m), (R, m) descending, (R, m, n)
+        kth = np.take_along_axis(sv, np.maximum(k - 1, 0)[:, None], axis=1)[:, 0]  # (R,) k-th largest
+        # _unit_push: full row rank, well conditioned (the k-th singular value of the k live rows)
+        pushable = (k <= a) & (kth > 1e-6 * np.maximum(1.0, sv[:, 0]))
+        ok &= (k == 0) | pushable
+        inv = np.where(sv > 1e-9 * sv[:, :1], 1.0 / np.where(sv > 0.0, sv, 1.0), 0.0)  # (R, m) pseudo-inverse
+        y = np.einsum("rmn,rm->rn", Wt, inv * np.einsum("rlm,rl->rm", U, -live.astype(float)))  # (R, n) least norm
+        y[k == 0] = 0.0
+        delta = np.einsum("rjn,rj->rn", Vt, y)  # (R, n): Vt^T y, a motion of null(A_c)
+        is_d = letters == 2
+        keep = is_d & (~stuck | live)  # (R, L) the D-points that remain rows of the cone
+        nd = np.linalg.norm(delta, axis=1)
+        vals = motions @ self.normal_rows.T  # (R, L)
+        found = (nd == 0.0) & np.all((vals < -STRICT_TOL * size[:, None]) | ~keep, axis=1)
+        for t in (1e-3, 1e-2, 1e-1, 1.0):
+            idx = np.flatnonzero(ok & (nd > 0.0) & ~found)
+            if not idx.size:
+                break
+            v2 = motions[idx] + (t * size[idx] / nd[idx])[:, None] * delta[idx]
+            val2 = v2 @ self.normal_rows.T
+            found[idx[np.all((val2 < -STRICT_TOL * np.linalg.norm(v2, axis=1)[:, None]) | ~keep[idx], axis=1)]] = True
+        return ok & found
 
     def _group_delta(self, g: int, letters: str, stuck: tuple[int, ...]) -> Array | None:
         """``(M,)`` joint motion of group ``g`` in ``null(J)`` of its contacts with ``letters``

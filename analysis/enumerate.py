@@ -14,7 +14,10 @@ D = 0 summed), every answer as exact as that of the combination alone:
 * DAFC (:mod:`analysis.dafc_family`): a member of one combination, re-checked, decides the
   combinations that let go of contacts it puts no force on, and its motion is tried, by force LPs
   batched into one HiGHS call, on every combination that lets go of contacts it keeps; the rest get
-  their own search (:func:`analysis.dafc.dafc_nonempty`). Level by level, in worker processes.
+  their own search (:func:`analysis.dafc.dafc_nonempty`), one row of each orbit of the scene's
+  symmetries (:mod:`analysis.symmetry`) first: the images of the members found are tried on the
+  others by the same batched force LPs, which certify them or decide nothing. Level by level, in
+  worker processes.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ import re
 from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -39,11 +43,11 @@ from analysis.dafc_family import (
     MemberCertificate,
     members_at,
     probe_motions,
-    slip_depends_on_redundancy,
 )
 from analysis.exceptions import CombinationError
 from analysis.motion import motion_dims
 from analysis.stationary_table import CLASS, stationary_verdicts
+from analysis.symmetry import symmetries
 
 _OPS: dict[str, Callable[[int, int], bool]] = {
     ">=": lambda a, b: a >= b, "<=": lambda a, b: a <= b, "==": lambda a, b: a == b,
@@ -84,6 +88,8 @@ class EnumerationStats:
     dafc_shared: int = 0  # combinations decided by a re-checked member (motion) of a stronger one
     dafc_batched: int = 0  # of the DAFC LPs, force LPs at a given motion (one HiGHS call a batch)
     dafc_probed: int = 0  # of the shared rows, decided at one of their own canonical probe motions
+    dafc_mirrored: int = 0  # of the shared rows, decided at the image of a member of a symmetric row
+    dafc_mirrored_empty: int = 0  # rows proven empty as the image of a proven-empty row (symmetric_empty)
 
     @property
     def lps(self) -> int:
@@ -100,10 +106,33 @@ PARALLEL_THRESHOLD = 2000
 #: Member motions of stronger combinations tried per combination, and force LPs per HiGHS call.
 MOTIONS_PER_ROW = 2
 BATCH = 256
+#: Batches of fewer than ``BATCH`` are split into this many (down to ``MIN_BATCH`` each), so that
+#: the worker processes share a level's few batches; a fixed rule, so the table does not depend
+#: on the number of workers.
+SPLIT = 4
+MIN_BATCH = 16
 #: Combinations per chunk of the batched motion-space dimensions.
 DIMS_CHUNK = 16384
 
+#: Up to this many contacts the queue of :meth:`_Enumeration._share` is kept by base-3 codes
+#: (a flag per combination: 3^15 bytes, 14 MB).
+OPEN_MAX_CONTACTS = 15
+_CODE = {"F": 0, "S": 1, "N": 1, "D": 2}
+#: ``symmetric_empty``: the largest residual of a map (relative mismatch of the mapped data) that
+#: carries a proven emptiness (a 1e-9 perturbation of the contact data changes no verdict that is
+#: not degenerate, issue 9).
+EMPTY_RESIDUAL = 1e-9
+
 _WORKER: dict[str, object] = {}
+
+_T = TypeVar("_T")
+
+
+def _batches(items: list[_T]) -> list[list[_T]]:
+    """``items`` in batches of at most ``BATCH``, at least ``SPLIT`` of them of ``MIN_BATCH`` or
+    more where there are that many."""
+    size = min(BATCH, max(MIN_BATCH, -(-len(items) // SPLIT)))
+    return [items[k:k + size] for k in range(0, len(items), size)]
 
 
 def _worker_init(system: GraspSystem) -> None:
@@ -119,13 +148,16 @@ def _shared_dims(system: GraspSystem, kin: FamilyKinematics, rows: list[tuple[st
     :meth:`FamilyKinematics.separating`, else from cdd's generators as :func:`dafc_nonempty`
     computes it; None when it has none), and its exactness (as :func:`dafc_nonempty`: no S-point,
     or ``a_bar = 1`` with slips that do not depend on the redundancy)."""
+    if not rows:
+        return []
+    strict = kin.separates([c for c, _, _ in rows], np.array([m for _, m, _ in rows]))  # (R,)
     out: list[tuple[int | None, bool]] = []
-    for c, motion, a_bar in rows:
+    for (c, _, a_bar), full in zip(rows, strict, strict=True):
         dim: int | None = a_bar
-        if kin.separating(c, motion) is None:
+        if not full:
             dirs = allowable_cone(CombinationParts.build(system, c).ms).all_directions()
             dim = int(np.linalg.matrix_rank(dirs, tol=1e-9)) if dirs.shape[0] else None
-        exact = "S" not in c or (a_bar == 1 and not slip_depends_on_redundancy(system, c))
+        exact = "S" not in c or (a_bar == 1 and not kin.slip_depends(c))
         out.append((dim, exact))
     return out
 
@@ -195,6 +227,7 @@ def enumerate_combinations(
     workers: int | None = None,
     where: Callable[[str], bool] | None = None,
     limit: int | None = None,
+    symmetric_empty: bool = False,
 ) -> tuple[list[CombinationSummary], EnumerationStats]:
     """Summaries of every combination (scene order of letters), strongest-first evaluation.
 
@@ -213,6 +246,13 @@ def enumerate_combinations(
     ``where`` (:func:`parse_where`) keeps only the combinations it accepts; ``limit`` stops after
     that many feasible combinations (strongest first) and returns the rows decided so far, with
     ``stats.stopped_at_limit``. ``progress(done, total)`` is called as combinations are decided.
+    ``symmetric_empty``: a row whose own search proved DAFC empty (exact) decides the rows of its
+    orbit under the scene's symmetries whose data the map carries onto theirs to within
+    ``EMPTY_RESIDUAL`` (:attr:`analysis.symmetry.Symmetry.residual`: points, normals, rows of
+    ``A``, ``w_ex`` and the friction pyramids), without a search of their own: DAFC of the image
+    is the image of DAFC (a member ``(v, f)`` of one maps to the member ``(T v, R f)`` of the
+    other), so it is empty too. Off by default: this carries a verdict, not a certificate that
+    the image row re-checks.
     """
     letters = ["FSD" if m > 0 else "ND" for m in system.mu]
     canonical = ["".join(p) for p in itertools.product(*letters)] if combinations is None else list(combinations)
@@ -223,7 +263,9 @@ def enumerate_combinations(
     if workers is None:
         workers = (os.cpu_count() or 1) if len(canonical) > PARALLEL_THRESHOLD else 1
     ordered = _order(dict.fromkeys(canonical))
-    results, stats = _Enumeration(system, ordered, admissible, progress).run(workers, limit)
+    enum = _Enumeration(system, ordered, admissible, progress)
+    enum.symmetric_empty = symmetric_empty
+    results, stats = enum.run(workers, limit)
     stats.combinations = len(canonical)
     return [results[c] for c in canonical if c in results], stats
 
@@ -237,6 +279,8 @@ class _Enumeration:
         self.results: dict[str, CombinationSummary] = {}
         self.stats = EnumerationStats()
         self.kin = FamilyKinematics(system)
+        self.symmetries = symmetries(system)
+        self.symmetric_empty = False
 
     def _tick(self) -> None:
         if self.progress is not None:
@@ -258,7 +302,10 @@ class _Enumeration:
         D = sy.D
         a, a_bar = np.zeros(0, dtype=int), np.zeros(0, dtype=int)
         if self.ordered:
-            chunks = [self.ordered[k:k + DIMS_CHUNK] for k in range(0, len(self.ordered), DIMS_CHUNK)]
+            # equal chunks of at most DIMS_CHUNK, at least one per worker process
+            count = max(-(-len(self.ordered) // DIMS_CHUNK), workers if self.pool is not None else 1)
+            size = -(-len(self.ordered) // count)
+            chunks = [self.ordered[k:k + size] for k in range(0, len(self.ordered), size)]
             parts = (self.pool.map(_worker_dims_of, chunks) if self.pool is not None and len(chunks) > 1
                      else (motion_dims(sy, ch) for ch in chunks))
             pairs = list(parts)
@@ -299,6 +346,7 @@ class _Enumeration:
 
     def _commit(self, c: str, summary: CombinationSummary, cert: MemberCertificate | None, lps: int) -> None:
         self.results[c] = summary
+        self._close(c)
         self.stats.dafc_lps += lps
         self.stats.dafc_searched += 1
         if cert is not None:
@@ -316,11 +364,31 @@ class _Enumeration:
                     self._feasible(c, cert.motion)
         if not queue:
             return
-        for c in cert.below():
-            if c in self.pending and c not in self.results:
-                motions = self.queue.setdefault(c, [])
-                if len(motions) < MOTIONS_PER_ROW:
-                    motions.append(cert.motion)
+        if self._open is None:
+            for c in cert.below():
+                if c in self.pending and c not in self.results:
+                    motions = self.queue.setdefault(c, [])
+                    if len(motions) < MOTIONS_PER_ROW:
+                        motions.append(cert.motion)
+            return
+        # the same by base-3 codes: the rows below are the source's code plus the sums of the
+        # non-empty subsets of its kept contacts' steps to D; the open ones take the motion
+        code = [_CODE[x] for x in cert.source]
+        sums = np.zeros(1, dtype=np.int64)
+        for i, k in enumerate(code):
+            if k != 2:
+                sums = np.concatenate([sums, sums + (2 - k) * self._pow3[i]])
+        below = int(np.dot(code, self._pow3)) + sums[1:]
+        for k in below[self._open[below]].tolist():
+            motions = self.queue.setdefault(self._row_of[k], [])
+            motions.append(cert.motion)
+            if len(motions) >= MOTIONS_PER_ROW:
+                self._open[k] = False
+
+    def _close(self, c: str) -> None:
+        """``c`` is decided: no more motions are queued for it."""
+        if self._open is not None:
+            self._open[int(np.dot([_CODE[x] for x in c], self._pow3))] = False
 
     def _feasible(self, c: str, motion: Array) -> None:
         """Record ``c`` as feasible with the member motion ``motion`` (already certified for it);
@@ -329,6 +397,7 @@ class _Enumeration:
         ak, abk = self.dims[c]
         self.results[c] = CombinationSummary(c, True, "feasible", ak, abk, 0, sy.D - abk, False,
                                              motion[sy.M:].copy(), motion)
+        self._close(c)
         self.shared.append(c)
         self.stats.dafc_shared += 1
         self.queue.pop(c, None)
@@ -364,11 +433,25 @@ class _Enumeration:
         to D lowers the level), so the rows of one level depend only on the levels above and are
         decided together, in the worker processes when there are any: first the force LPs at the
         queued member motions of stronger rows (:func:`members_at`, batches of ``BATCH`` in the
-        strongest-first order), then their own searches; results are committed in that order, so
-        the table does not depend on the number of workers."""
+        strongest-first order), then the probe motions and then the own searches, each first for
+        one row of every orbit of the scene's symmetries and, after the images of the members found
+        so far (:meth:`_mirror`), for the rest; results are committed in that order, so the table
+        does not depend on the number of workers."""
         self.pending = set(self.dafc_rows)
+        # the pending rows not decided whose queue is not full, by base-3 code (F 0, S/N 1, D 2)
+        L = self.system.L
+        self._pow3 = 3 ** np.arange(L, dtype=np.int64)
+        self._open: NDArray[np.bool_] | None = None
+        if L <= OPEN_MAX_CONTACTS:
+            codes = (np.array([[_CODE[x] for x in c] for c in self.dafc_rows], dtype=np.int64).reshape(-1, L)
+                     @ self._pow3)
+            self._open = np.zeros(3**L, dtype=bool)
+            self._open[codes] = True
+            self._row_of = dict(zip(codes.tolist(), self.dafc_rows, strict=True))
         self.queue: dict[str, list[Array]] = {}  # queued member motions of stronger combinations
         self.shared: list[str] = []  # decided by a stronger combination's member
+        self.mirrored: set[tuple[str, str]] = set()  # (row, symmetric row) whose member was tried on it
+        self.mirror_sources: set[str] = set()  # rows whose member's images were tried
         levels: dict[int, list[str]] = {}
         for c in self.dafc_rows:
             levels.setdefault(sum(CLASS[x] for x in c), []).append(c)
@@ -379,7 +462,7 @@ class _Enumeration:
                 todo = [c for c in rows if c not in self.results and self.queue.get(c)]
                 if not todo:
                     break
-                batches = [[(c, self.queue[c][0]) for c in todo[k:k + BATCH]] for k in range(0, len(todo), BATCH)]
+                batches = _batches([(c, self.queue[c][0]) for c in todo])
                 outs = (pool.map(_worker_batch, batches) if pool is not None else
                         (members_at(self.kin, b) for b in batches))
                 for pairs, good in zip(batches, outs, strict=True):
@@ -391,26 +474,106 @@ class _Enumeration:
                             self._share(cert, queue=False)  # its motion is queued below already
                         else:
                             self.queue[c] = self.queue[c][1:]
-            todo = [c for c in rows if c not in self.results]
-            self._probe(todo, pool)
-            todo = [c for c in todo if c not in self.results]
-            # one search per task: they differ by 100x in cost (a slip-sector search runs up to its
-            # budget), so chunks of several left a worker idle at the end of a level
-            found = (pool.map(_worker_search, todo, chunksize=1)
-                     if pool is not None else (_own_search(self.system, c) for c in todo))
-            for k, (c, out) in enumerate(zip(todo, found, strict=True)):
-                self._commit(c, *out)
-                if k % 64 == 63:
-                    self._tick()
+            # probes and own searches: one row of each orbit of the scene's symmetries first; the
+            # images of their members decide most of the others without probes or a search
+            self._mirror(rows, pool)
+            first, rest = self._representatives([c for c in rows if c not in self.results])
+            self._probe(first, pool)
+            self._mirror(rows, pool)
+            self._probe([c for c in rest if c not in self.results], pool)
+            self._mirror(rows, pool)
+            first, rest = self._representatives([c for c in rows if c not in self.results])
+            self._search(first, pool)
+            self._mirror(rows, pool)
+            if self.symmetric_empty:
+                self._mirror_empty(first)
+            self._search([c for c in rest if c not in self.results], pool)
             self._tick()
             if limit is not None and self._reached(limit, rows[-1]):
                 break
         self._finish_shared(pool, workers)
 
+    def _search(self, todo: list[str], pool: ProcessPoolExecutor | None) -> None:
+        """The own searches of ``todo``, committed in its order."""
+        # one search per task: they differ by 100x in cost (a slip-sector search runs up to its
+        # budget), so chunks of several left a worker idle at the end of a level
+        found = (pool.map(_worker_search, todo, chunksize=1)
+                 if pool is not None else (_own_search(self.system, c) for c in todo))
+        for k, (c, out) in enumerate(zip(todo, found, strict=True)):
+            self._commit(c, *out)
+            if k % 64 == 63:
+                self._tick()
+
+    def _representatives(self, todo: list[str]) -> tuple[list[str], list[str]]:
+        """``todo`` split into the first row of each orbit of the scene's symmetries
+        (:func:`analysis.symmetry.symmetries`) and the others, each in ``todo``'s order."""
+        first: list[str] = []
+        rest: list[str] = []
+        seen: set[str] = set()
+        for c in todo:
+            if c in seen:
+                rest.append(c)
+                continue
+            first.append(c)
+            seen.update(g.combination(c) for g in self.symmetries)
+        return first, rest
+
+    def _mirror(self, rows: list[str], pool: ProcessPoolExecutor | None) -> None:
+        """The images of the members of ``rows`` (one level) under the scene's symmetries, tried
+        on the undecided rows they are motions of by the force LPs of :func:`members_at` (which
+        certify them for that row, or decide nothing); a member's certificate is shared as an own
+        search's is. A symmetry maps a level to itself, and the images of an image are images, so
+        one pass decides what the members found so far can."""
+        if not self.symmetries:
+            return
+        pairs: list[tuple[str, Array]] = []
+        targets: set[str] = set()
+        for c in rows:
+            r = self.results.get(c)
+            if r is None or not r.feasible or r.example_motion is None or c in self.mirror_sources:
+                continue
+            self.mirror_sources.add(c)  # its images are decided, not pending, or tried below
+            for g in self.symmetries:
+                c2 = g.combination(c)
+                if (c2 in self.pending and c2 not in self.results and c2 not in targets
+                        and (c2, c) not in self.mirrored):
+                    targets.add(c2)
+                    self.mirrored.add((c2, c))
+                    pairs.append((c2, g.motion(r.example_motion)))
+        if not pairs:
+            return
+        batches = _batches(pairs)
+        outs = pool.map(_worker_batch, batches) if pool is not None else (members_at(self.kin, b) for b in batches)
+        for batch, certs in zip(batches, outs, strict=True):
+            self.stats.dafc_lps += len(batch)
+            self.stats.dafc_batched += len(batch)
+            for (c, motion), cert in zip(batch, certs, strict=True):
+                if cert is not None and c not in self.results:
+                    self._feasible(c, motion)
+                    self.stats.dafc_mirrored += 1
+                    self._share(cert)
+
+    def _mirror_empty(self, rows: list[str]) -> None:
+        """``symmetric_empty``: the undecided images of the rows of ``rows`` proven empty (exact,
+        reason "DAFC is empty"), under the maps whose residual is at most ``EMPTY_RESIDUAL``, are
+        empty with the same reason and exactness (:func:`enumerate_combinations`)."""
+        for c in rows:
+            r = self.results.get(c)
+            if r is None or r.feasible or not r.exact or r.reason != "DAFC is empty":
+                continue
+            for g in self.symmetries:
+                c2 = g.combination(c)
+                if g.residual > EMPTY_RESIDUAL or c2 not in self.pending or c2 in self.results:
+                    continue
+                ak, abk = self.dims[c2]
+                self.results[c2] = CombinationSummary(c2, False, r.reason, ak, abk, 0, r.dim_dpfc, True, None)
+                self._close(c2)
+                self.stats.dafc_mirrored_empty += 1
+
     def _probe(self, rows: list[str], pool: ProcessPoolExecutor | None) -> None:
         """Canonical motions of ``rows`` (:func:`probe_motions`) tried by batched force LPs before
         their own searches; a member's certificate is shared as an own search's is."""
-        chunks = [rows[k:k + BATCH] for k in range(0, len(rows), BATCH)]
+        chunks = _batches(rows)
         outs = (pool.map(_worker_probe, chunks) if pool is not None else (_probe(self.kin, ch) for ch in chunks))
         for chunk, (certs, tried) in zip(chunks, outs, strict=True):
             self.stats.dafc_lps += tried

@@ -51,9 +51,10 @@ def cpu_seconds() -> float:
 LAST_STATS: list[EnumerationStats] = []
 
 
-def time_enum(name: str, workers: int, repeat: int = 1) -> tuple[float, int, int, float, int]:
+def time_enum(name: str, workers: int, repeat: int = 1, symmetric_empty: bool = False
+              ) -> tuple[float, int, int, float, int]:
     """Best wall time, feasible count, combinations, CPU seconds and LPs solved of that run (its
-    statistics in ``LAST_STATS``)."""
+    statistics in ``LAST_STATS``); ``symmetric_empty``: :func:`enumerate_combinations`' option."""
     sy = build_system(load_scene(ROOT / "examples" / f"{name}.json"))
     times = []
     cpus = []
@@ -61,7 +62,7 @@ def time_enum(name: str, workers: int, repeat: int = 1) -> tuple[float, int, int
     for _ in range(repeat):
         c = cpu_seconds()
         t = time.perf_counter()
-        res, st = enumerate_combinations(sy, workers=workers)
+        res, st = enumerate_combinations(sy, workers=workers, symmetric_empty=symmetric_empty)
         times.append(time.perf_counter() - t)
         cpus.append(cpu_seconds() - c)
         feas, n, lps = sum(r.feasible for r in res), len(res), st.stationary_lps + st.dafc_lps
@@ -73,7 +74,8 @@ def time_enum(name: str, workers: int, repeat: int = 1) -> tuple[float, int, int
 def how(st: EnumerationStats) -> str:
     """How the DAFC rows were decided."""
     return (f"{st.dafc_searched} own DAFC searches, {st.dafc_shared} rows by a stronger row's member "
-            f"({st.dafc_batched} of the LPs at its motion, batched)")
+            f"({st.dafc_batched} of the LPs at its motion, batched; {st.dafc_mirrored} rows at a symmetric row's "
+            f"member{f', {st.dafc_mirrored_empty} empty as a symmetric row' if st.dafc_mirrored_empty else ''})")
 
 
 def time_report(name: str, combination: str, repeat: int = 5) -> tuple[float, float]:
@@ -306,12 +308,16 @@ def main() -> None:
         t, f, n, c, lps = time_enum("sphere_four_finger_wrap", workers=cores)
         print(f"sphere_four_finger_wrap: all {n} combinations, {cores} processes: {t:.1f} s wall, "
               f"{c:.1f} s CPU in total, {lps} LPs ({f} feasible; {how(LAST_STATS[0])})  [target < 5 s]")
+        t, f, n, c, lps = time_enum("sphere_four_finger_wrap", workers=cores, symmetric_empty=True)
+        print(f"sphere_four_finger_wrap with symmetric_empty: {cores} processes: {t:.1f} s wall, "
+              f"{c:.1f} s CPU in total, {lps} LPs ({f} feasible; {how(LAST_STATS[0])})  [target < 5 s]")
     if args.twelve:
         cores = os.cpu_count() or 1
-        t, f, n, c, lps = time_enum("sphere_wrap_three_link", workers=cores)
-        print(f"sphere_wrap_three_link (12 contacts): the feasible list of all {n} combinations, {cores} processes: "
-              f"{t:.1f} s wall, {c:.1f} s CPU in total, {lps} LPs ({f} feasible; {how(LAST_STATS[0])})  "
-              "[target < 60 s]")
+        for option in (False, True):
+            t, f, n, c, lps = time_enum("sphere_wrap_three_link", workers=cores, symmetric_empty=option)
+            print(f"sphere_wrap_three_link (12 contacts){' with symmetric_empty' if option else ''}: the feasible "
+                  f"list of all {n} combinations, {cores} processes: {t:.1f} s wall, {c:.1f} s CPU in total, {lps} "
+                  f"LPs ({f} feasible; {how(LAST_STATS[0])})  [target < 60 s]")
     print(f"load average after: {os.getloadavg()[0]:.2f} ({Path('/proc/loadavg').read_text().strip()})")
 
 

@@ -1,6 +1,6 @@
 """Whole enumeration tables of example scenes, dumped for before/after comparisons, with CPU seconds.
 
-    .venv/bin/python benchmarks/enum_tables.py --out /tmp/tables.json [--workers 1] [scene ...]
+    .venv/bin/python benchmarks/enum_tables.py --out /tmp/tables.json [--workers 1] [--symmetric-empty] [scene ...]
     .venv/bin/python benchmarks/enum_tables.py --compare /tmp/before.json /tmp/after.json
 
 Each row: combination, verdict, DAFC dimension, exactness, reason (and a, a~, dim DPFC). The
@@ -35,16 +35,17 @@ def cpu_seconds() -> float:
     return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def dump(scenes: list[str], workers: int) -> dict[str, object]:
+def dump(scenes: list[str], workers: int, symmetric_empty: bool = False) -> dict[str, object]:
     out: dict[str, object] = {"machine": machine()}
     for name in scenes:
         sy = build_system(load_scene(ROOT / "examples" / f"{name}.json"))
         c0, t0 = cpu_seconds(), time.perf_counter()
-        rows, st = enumerate_combinations(sy, workers=workers)
+        rows, st = enumerate_combinations(sy, workers=workers, symmetric_empty=symmetric_empty)
         cpu, wall = cpu_seconds() - c0, time.perf_counter() - t0
         print(f"{name}: {len(rows)} combinations, {sum(r.feasible for r in rows)} feasible, "
               f"CPU {cpu:.1f} s, wall {wall:.1f} s (workers={workers}), {st.lps} LPs "
-              f"({st.dafc_searched} own DAFC searches, {st.dafc_shared} shared)", flush=True)
+              f"({st.dafc_searched} own DAFC searches, {st.dafc_shared} shared, {st.dafc_mirrored} at a symmetric "
+              f"row's member, {st.dafc_mirrored_empty} empty as a symmetric row)", flush=True)
         out[name] = {"cpu": cpu, "wall": wall, "lps": st.lps, "rows": [
             [r.combination, r.feasible, r.dim_dafc, r.exact, r.reason, r.a, r.a_bar, r.dim_dpfc] for r in rows]}
     return out
@@ -76,12 +77,14 @@ def main() -> None:
     ap.add_argument("--out")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--compare", nargs=2)
+    ap.add_argument("--symmetric-empty", action="store_true",
+                    help="proven emptiness carried to symmetric rows (enumerate_combinations(symmetric_empty=True))")
     args = ap.parse_args()
     if args.compare:
         before, after = (json.loads(Path(p).read_text()) for p in args.compare)
         sys.exit(1 if compare(before, after) else 0)
     print(machine())
-    out = dump(args.scenes, args.workers)
+    out = dump(args.scenes, args.workers, args.symmetric_empty)
     if args.out:
         Path(args.out).write_text(json.dumps(out))
 
