@@ -76,9 +76,33 @@ class AnalysisPublic(BaseModel):
     stats: dict[str, int] | None = None
 
 
+class PlannerSwitches(_In):
+    """The planner's optional kinds of edges (``planner.options.PlannerOptions``; ``ctp plan``'s
+    flags of the same names). Each adds states to the search, so each is off unless asked."""
+
+    sliding_motions: Annotated[bool | None, Field(strict=True)] = Field(
+        None, description="object motions in which the contacts on fixed bodies slide (S) while the fingers "
+                          "stick: null for pose and displacement goals only, true always, false never "
+                          "(a sphere on a table then only rolls)")
+    link_sliding: Annotated[bool, Field(strict=True)] = Field(
+        False, description="object motions towards a goal pose in which the contacts of an arm's distal link "
+                           "slide along the object's faces (S at links)")
+    link_replacement: Annotated[bool, Field(strict=True)] = Field(
+        False, description="lay a link an arm let go of flat on a face of a box object again, the other arms "
+                           "pinned")
+    contact_slides: Annotated[bool, Field(strict=True)] = Field(
+        False, description="slide a link's contact along a face of a box object while the other contacts hold "
+                           "it still (eq. 33 with an S-point)")
+    separate_finger_contacts: Annotated[bool, Field(strict=True)] = Field(
+        False, description="object motions may also separate single finger contacts, not only those on fixed "
+                           "bodies")
+
+
 class PlanCreate(_In):
     scene: Scene
     goal: Goal
+    options: PlannerSwitches | None = Field(
+        None, description="optional kinds of planner edges (as `ctp plan`'s flags); omitted: the defaults")
     time_limit: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = Field(
         None, description="seconds; default and maximum: the server's job_time_limit")
     replay: Annotated[bool, Field(strict=True)] = Field(

@@ -101,9 +101,11 @@ REPLAY_UNITS = {"position_error": "m", "rotation_error": "rad", "planned_transla
 
 
 def run_plan(payload: dict[str, Any], progress: Progress | None = None) -> dict[str, Any]:
-    """A plan from the scene's grasp to the goal (``planner.plan``); with ``replay``, then its
-    continuous MuJoCo replay (:func:`_replay`, the result's ``replay``)."""
+    """A plan from the scene's grasp to the goal (``planner.plan``, with the planner switches of
+    ``options``); with ``replay``, then its continuous MuJoCo replay (:func:`_replay`, the result's
+    ``replay``)."""
     from planner import Goal, plan  # on a worker's first plan only (see the module docstring)
+    from planner.options import PlannerOptions
 
     t0 = time.perf_counter()
     scene = scene_from_dict(payload["scene"])
@@ -115,7 +117,8 @@ def run_plan(payload: dict[str, Any], progress: Progress | None = None) -> dict[
     if replay and progress is not None:
         def on_search(frac: float, message: str) -> None:
             progress(REPLAY_PLAN_SHARE * frac, message)
-    result = plan(scene, goal, progress=on_search, time_limit=search_limit)
+    options = PlannerOptions(**payload["options"]) if payload.get("options") else None  # api.schemas.PlannerSwitches
+    result = plan(scene, goal, progress=on_search, time_limit=search_limit, options=options)
     out: dict[str, Any] = result.to_json()
     out.setdefault("elapsed_seconds", time.perf_counter() - t0)
     if replay:

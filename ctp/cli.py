@@ -583,6 +583,12 @@ def plan(
     contact_slides: Annotated[bool, typer.Option(
         help="also slide a link's contact along a face of a box object while the other contacts hold it "
              "still (eq. 33 with an S-point; whole-arm regrasps)")] = False,
+    link_sliding: Annotated[bool, typer.Option(
+        help="object motions towards a goal pose in which the contacts of an arm's distal link slide "
+             "along the object's faces (S at links)")] = False,
+    separate_finger_contacts: Annotated[bool, typer.Option(
+        help="object motions may also separate single finger contacts, not only those on fixed bodies "
+             "(more edges, slower)")] = False,
     out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
     replay: Annotated[bool, typer.Option(help="replay the whole plan in MuJoCo (one continuous simulation)")] = False,
     posture_rate: Annotated[float, typer.Option(help="--replay: " + POSTURE_HELP)] = POSTURE_RATE,
@@ -634,7 +640,8 @@ def plan(
         try:
             result = make_plan(sc, g, progress=step, time_limit=time_limit,
                                options=PlannerOptions(link_replacement=link_replacement, sliding_motions=sliding,
-                                                      contact_slides=contact_slides))
+                                                      contact_slides=contact_slides, link_sliding=link_sliding,
+                                                      separate_finger_contacts=separate_finger_contacts))
         except SceneError as e:
             _fail(str(e))
         except CTPError as e:

@@ -56,6 +56,8 @@ def create_plan(raw: Annotated[PlanCreate, SkipValidation], settings: SettingsDe
     request = {"scene": body.scene.model_dump(mode="json"), "goal": goal, "time_limit": limit}
     if body.replay:
         request["replay"] = True  # only when asked: other requests keep their stored form
+    if body.options is not None:
+        request["options"] = body.options.model_dump(mode="json", exclude_unset=True)  # the switches given
     job = _jobs.submit(store, runner, KIND, request)
     response.headers["Location"] = f"/plans/{job.id}"
     return _jobs.public(job, "/plans")

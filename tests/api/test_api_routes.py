@@ -7,6 +7,7 @@ import json
 import math
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -424,3 +425,47 @@ def test_geometric_scene_errors_are_422_naming_the_field(client: TestClient, rou
         assert r.headers["x-lane"] == ("light" if route == "/scenes/geometry" else "heavy")
     if route in ("/enumerations", "/plans"):  # refused at the door: no job was stored
         assert client.get(route).json()["count"] == jobs_before
+
+
+def test_plan_options_are_the_planners_switches_stored_as_given(client: TestClient) -> None:
+    """``options`` of ``POST /plans``: each switch is a ``PlannerOptions`` field with the same
+    default; the job stores the switches given (none: the request keeps its former form, so
+    earlier jobs and cache keys are unchanged); unknown or non-boolean switches are 422 naming them."""
+    import dataclasses
+
+    from api.schemas import PlannerSwitches
+    from planner.options import PlannerOptions
+
+    defaults = {f.name: f.default for f in dataclasses.fields(PlannerOptions)}
+    for name, field in PlannerSwitches.model_fields.items():
+        assert name in defaults and field.default == defaults[name], name
+    store = client.app.state.store  # type: ignore[attr-defined]
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}, "time_limit": 5,
+                                    "options": {"contact_slides": True, "sliding_motions": False}})
+    assert r.status_code == 202, r.text
+    assert store.get(r.json()["id"]).request["options"] == {"contact_slides": True, "sliding_motions": False}
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}, "time_limit": 5})
+    assert "options" not in store.get(r.json()["id"]).request
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}, "options": {"fly": True}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("options.fly:"), r.text
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}, "options": {"link_sliding": "yes"}})
+    assert r.status_code == 422 and r.json()["detail"].startswith("options.link_sliding:"), r.text
+
+
+def test_a_plan_job_runs_the_planner_with_its_options(monkeypatch: pytest.MonkeyPatch) -> None:
+    import planner
+    from api.tasks import run_plan
+    from planner.options import PlannerOptions
+
+    seen: list[PlannerOptions | None] = []
+    real = planner.plan
+
+    def spy(*args: Any, options: PlannerOptions | None = None, **kwargs: Any) -> Any:
+        seen.append(options)
+        return real(*args, options=options, max_expansions=1, **kwargs)
+
+    monkeypatch.setattr(planner, "plan", spy)
+    run_plan({"scene": PLANAR, "goal": {"type": "active"}, "options": {"link_replacement": True}})
+    assert seen[-1] == PlannerOptions(link_replacement=True)
+    run_plan({"scene": PLANAR, "goal": {"type": "active"}})
+    assert seen[-1] is None

@@ -201,6 +201,11 @@ def test_ctp_plan_contact_slides_reaches_the_planner(monkeypatch) -> None:  # ty
         r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
         assert r.exit_code in (0, 1), r.output
         assert seen[-1] is not None and seen[-1].contact_slides is want
+    for name in ("link_sliding", "separate_finger_contacts"):  # the other switches, off by default
+        assert getattr(seen[-1], name) is False
+        r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", "--" + name.replace("_", "-")])
+        assert r.exit_code in (0, 1), r.output
+        assert getattr(seen[-1], name) is True
 
 
 @pytest.mark.slow
