@@ -18,6 +18,11 @@ stops it. Every request loop is bounded (a fixed number of requests, a time-out 
   same scenes.
 * ``cached`` (issue 13, the content-addressed cache): C clients x R requests that each repeat one
   of 20 analyses made before. Target: p95 under 20 ms.
+* ``bodies`` (issue 13, the event loop): 4 clients each send 5 bodies of about 1 MB (a planar scene
+  with 8,900 contacts: two tables, an enumeration, one combination whose letters do not match: all
+  refused) while one client asks ``GET /health`` every 20 ms. Target: the slowest /health under
+  150 ms, every body refused with its 413/422 (bodies over ``inline_body_bytes`` are decoded and
+  checked in a light worker, api/bodies.py).
 
 ``--samples N`` makes the light requests quick reports (``samples``: N DAFC directions instead of
 the server's 120), as a dashboard that wants an answer while the user clicks may ask. Each
@@ -32,7 +37,7 @@ are listed but are not a target. The clients are a minimal keep-alive HTTP clien
 so that the load generator does not take the CPU it measures. The exit code is 1 when a scenario
 misses its target.
 
-    .venv/bin/python benchmarks/service.py [--scenario all|report|mixed|mixed-repeat|cached] [--clients 20]
+    .venv/bin/python benchmarks/service.py [--scenario all|report|mixed|mixed-repeat|cached|bodies] [--clients 20]
         [--requests-per-client 10] [--workers 2] [--light-workers 2] [--requests 200] [--table] [--samples N]
 """
 
@@ -62,6 +67,7 @@ from machine import machine  # noqa: E402
 
 LIGHT_P95_TARGET = 0.400
 CACHED_P95_TARGET = 0.020
+HEALTH_MAX_TARGET = 0.150
 
 
 def free_port() -> int:
@@ -206,13 +212,16 @@ class Client:
         self.reader, self.writer = await asyncio.open_connection(self.host, self.port)
 
     async def post(self, path: str, body: bytes, timeout: float = 120) -> tuple[int, dict[str, str], bytes]:
-        return await asyncio.wait_for(self._post(path, body), timeout)
+        return await asyncio.wait_for(self._request("POST", path, body), timeout)
 
-    async def _post(self, path: str, body: bytes) -> tuple[int, dict[str, str], bytes]:
+    async def get(self, path: str, timeout: float = 120) -> tuple[int, dict[str, str], bytes]:
+        return await asyncio.wait_for(self._request("GET", path, b""), timeout)
+
+    async def _request(self, method: str, path: str, body: bytes) -> tuple[int, dict[str, str], bytes]:
         if self.writer is None:
             await self.open()
         assert self.reader is not None and self.writer is not None
-        head = (f"POST {path} HTTP/1.1\r\nHost: {self.host}\r\nContent-Type: application/json\r\n"
+        head = (f"{method} {path} HTTP/1.1\r\nHost: {self.host}\r\nContent-Type: application/json\r\n"
                 f"Content-Length: {len(body)}\r\n\r\n")
         self.writer.write(head.encode() + body)
         await self.writer.drain()
@@ -302,9 +311,51 @@ async def mixed(base: str, light: list[list[dict[str, Any]]], heavy_scene: dict[
     return run, heavy
 
 
+async def bodies_run(base: str, posts: list[tuple[str, bytes]], rounds: int = 5) -> tuple[Run, Run, list[int]]:
+    """Each of ``posts`` from its own client ``rounds`` times while one client polls /health every
+    20 ms: (the posts' run, the health run, the posts' status codes)."""
+    sent, health, codes = Run(), Run(), []
+    done = asyncio.Event()
+
+    async def poster(path: str, body: bytes) -> None:
+        c = Client(base)
+        try:
+            for _ in range(rounds):
+                t0 = time.perf_counter()
+                status, _, data = await c.post(path, body)
+                sent.latencies.append(time.perf_counter() - t0)
+                codes.append(status)
+                if status not in (413, 422):
+                    sent.errors.append(f"{status}: {data[:200].decode(errors='replace')}")
+        finally:
+            await c.close()
+
+    async def poller() -> None:
+        c = Client(base)
+        try:
+            while not done.is_set():
+                t0 = time.perf_counter()
+                status, _, data = await c.get("/health")
+                health.latencies.append(time.perf_counter() - t0)
+                if status != 200:
+                    health.errors.append(f"{status}: {data[:200].decode(errors='replace')}")
+                await asyncio.sleep(0.02)
+        finally:
+            await c.close()
+
+    t0 = time.perf_counter()
+    polling = asyncio.create_task(poller())
+    await asyncio.gather(*(poster(p, b) for p, b in posts))
+    done.set()
+    await polling
+    sent.wall = health.wall = time.perf_counter() - t0
+    return sent, health, codes
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenario", choices=("all", "report", "mixed", "mixed-repeat", "cached"), default="all")
+    ap.add_argument("--scenario", choices=("all", "report", "mixed", "mixed-repeat", "cached", "bodies"),
+                    default="all")
     ap.add_argument("--requests", type=int, default=200, help="report: requests in all")
     ap.add_argument("--clients", type=int, default=20)
     ap.add_argument("--requests-per-client", type=int, default=10, help="mixed, cached")
@@ -377,6 +428,26 @@ def main() -> None:
                 if run.errors or not run.latencies or run.p(95) >= CACHED_P95_TARGET or run.hits < len(run.latencies):
                     missed.append(f"cached: p95 {1000 * run.p(95):.1f} ms (target < {1000 * CACHED_P95_TARGET:.0f}), "
                                   f"{run.hits} hits of {len(run.latencies)}, {len(run.errors)} errors")
+            if args.scenario in ("all", "bodies"):
+                big = copy.deepcopy(planar)
+                big["contacts"] = [dict(planar["contacts"][0]) for _ in range(8900)]
+                table_body = json.dumps({"scene": big}).encode()
+                wrong = json.dumps({"scene": big, "combination": "FDFDD"}).encode()
+                posts = [("/analyses", table_body), ("/analyses", table_body), ("/analyses", wrong),
+                         ("/enumerations", table_body)]
+                load = Load(proc.pid)
+                sent, health, codes = asyncio.run(bodies_run(base, posts))
+                out.append(f"bodies: 4 clients x 5 bodies of {len(table_body) / 1e6:.2f} MB (8,900 contacts: tables, "
+                           "an enumeration, a combination of 5 letters) while one client asks GET /health every "
+                           f"20 ms; answers {sorted(set(codes))}")
+                out.append(sent.line("bodies"))
+                out.append(health.line("health"))
+                out.append(load.line())
+                worst = max(health.latencies, default=float("inf"))
+                if sent.errors or health.errors or worst >= HEALTH_MAX_TARGET:
+                    missed.append(f"bodies: slowest /health {1000 * worst:.0f} ms (target < "
+                                  f"{1000 * HEALTH_MAX_TARGET:.0f}), {len(sent.errors) + len(health.errors)} errors")
+                out.extend(f"    {e[:160]}" for e in (sent.errors + health.errors)[:5])
             if args.scenario in ("all", "report"):
                 combo = feasible[0]
                 own = {**planar, "name": "planar-report"}
