@@ -33,7 +33,7 @@ from fastapi.routing import APIRoute
 from pydantic import BaseModel
 
 from analysis.exceptions import SceneError
-from api.body_rules import RULE_SETTINGS, RULES, validate_body
+from api.body_rules import RULE_SETTINGS, RULES, decode_json, validate_body
 from api.exceptions import ApiError
 from api.lanes import use_lane
 from api.settings import Settings
@@ -78,12 +78,19 @@ async def screen_large_body(request: Request, rule: str) -> None:
     """Screen ``request``'s JSON body in a light worker when it is over ``inline_body_bytes``
     (under ``request_time_limit``; ``X-Lane: light``), raising the route's refusal. Light: decoding
     and counting take tens of milliseconds a megabyte, and the heavy lane may be busy with a table
-    for up to its time limit."""
+    for up to its time limit. A smaller body is decoded here (:func:`~api.body_rules.decode_json`:
+    a key written twice is a 422 either way)."""
     settings: Settings = request.app.state.settings
     if request.method != "POST" or not _is_json(request.headers.get("content-type")):
         return
     body = await request.body()  # kept by the request: the route reads the same bytes
     if len(body) <= settings.inline_body_bytes:
+        try:  # decoded here, refusing a key written twice; FastAPI then reads the request's decoded JSON
+            request._json = decode_json(body)  # Starlette's cache of Request.json()
+        except ApiError:
+            raise
+        except (ValueError, RecursionError):
+            pass  # not JSON: FastAPI decodes it again and gives its own answer
         return
     use_lane(request, "light")
     limits = {name: getattr(settings, name) for name in RULE_SETTINGS}

@@ -167,6 +167,29 @@ RULES: dict[str, BodyRule[Any]] = {
 RULE_SETTINGS = ("max_joints", "max_contacts")
 
 
+def duplicate_key_error(key: str) -> ApiError:
+    shown = key if len(key) <= 40 else key[:37] + "..."
+    return ApiError(422, f"body: the key {shown!r} is written twice in one object; write each key once",
+                    errors=[{"loc": ["body"], "msg": f"duplicate key {shown!r}", "type": "duplicate_key"}])
+
+
+def _unique_object(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise duplicate_key_error(key)
+        out[key] = value
+    return out
+
+
+def decode_json(body: bytes) -> Any:
+    """``body`` decoded as Starlette decodes JSON (:func:`json.loads` of the bytes), except that a key
+    written twice in one object is refused (ApiError 422): the standard library keeps the last one
+    silently, so a scene's first ``contacts`` would be lost without a word (scene files are refused
+    the same way, :mod:`analysis.loader`)."""
+    return json.loads(body, object_pairs_hook=_unique_object)
+
+
 def screen_body(rule: str, body: bytes, limits: dict[str, Any]) -> dict[str, Any]:
     """The worker's half of :class:`ScreenedBodyRoute`: ``body`` decoded as FastAPI decodes JSON
     and run through ``RULES[rule]`` with ``limits`` (:data:`RULE_SETTINGS`). Returns the outcome as
@@ -175,7 +198,9 @@ def screen_body(rule: str, body: bytes, limits: dict[str, Any]) -> dict[str, Any
     ``"unreadable"`` (``"recursion"``: nested too deeply; ``"other"``: not UTF-8 and the like),
     ``"refused"`` (an :class:`ApiError`'s fields), ``"scene"`` (a SceneError's)."""
     try:
-        data = json.loads(body)
+        data = decode_json(body)
+    except ApiError as e:  # a key written twice
+        return {"refused": {"status": e.status, "detail": e.detail, "limit": e.limit, "errors": e.errors}}
     except json.JSONDecodeError as e:
         return {"invalid": [{"type": "json_invalid", "loc": ["body", e.pos], "msg": "JSON decode error"}]}
     except RecursionError:

@@ -61,6 +61,10 @@ CASES: list[tuple[str, bytes, dict[str, str]]] = [
     ("/scenes/geometry", json.dumps({"scene": PLANAR, "extra": [0] * 10}).encode(), J),
     ("/scenes/contacts", json.dumps({"scene": {**PLANAR, "contacts": "auto"}, "tolerance": -1}).encode(), J),
     ("/analyses", b'{"scene": {"dim": 2,', J),  # JSON decode error
+    ("/analyses", json.dumps({"scene": PLANAR, "combination": "FDFDD"})[:-1].encode() + b', "combination": "FFFFF"}',
+     J),  # a key written twice
+    ("/plans", json.dumps({"scene": PLANAR, "goal": {"type": "active"}}).replace(
+        '"contacts": [', '"contacts": [], "contacts": [', 1).encode(), J),
     ("/plans", b"[" * 100_000 + b"]" * 100_000, J),  # nested too deeply
     ("/analyses", b'{"scene": "\xff\xfe"}', J),  # not UTF-8
     ("/analyses", b'{"scene": 1}', {"content-type": "text/plain"}),  # not read as JSON
@@ -111,6 +115,21 @@ def test_the_cases_cover_every_outcome_of_the_screen() -> None:
         if headers is J:
             kinds |= set(screen_body(rules[route], content, limits))
     assert kinds == {"accepted", "invalid", "unreadable", "refused", "scene"}, kinds
+
+
+@pytest.mark.parametrize("inline", [True, False])
+def test_a_key_written_twice_is_422_naming_it(pair: tuple[TestClient, TestClient], inline: bool) -> None:
+    """JSON keeps the last of two equal keys silently: the scene's first ``contacts`` (or the first
+    ``combination``) would be lost without a word. Refused read in the server and screened alike."""
+    client = pair[0] if inline else pair[1]
+    body = json.dumps({"scene": PLANAR, "goal": {"type": "active"}})
+    body = body.replace('"contacts": [', '"contacts": [], "contacts": [', 1)
+    r = client.post("/plans", content=body.encode(), headers=J)
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == "body: the key 'contacts' is written twice in one object; write each key once"
+    assert r.json()["errors"][0]["type"] == "duplicate_key"
+    r = client.post("/plans", content=body.replace('"contacts": [], ', "", 1).encode(), headers=J)
+    assert r.status_code == 202, r.text
 
 
 def test_a_large_message_to_a_worker_still_importing_does_not_block_the_event_loop() -> None:
