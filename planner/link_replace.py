@@ -288,8 +288,8 @@ def replace_edges(nodes: GraphNodes, state: GraspState) -> list[Successor]:
     transfer is planned by :func:`validate_replace` when the search needs the edge."""
     hand, model, options = nodes.hand, nodes.model, nodes.options
     out: list[Successor] = []
-    if not state.contacts:
-        return out
+    if not state.contacts or state.dim != 3 or not isinstance(nodes.scene.object.shape, Box):
+        return out  # faces of a box object only (face_targets): nothing to lay a link on
     sa = nodes.analysis(state)
     grasp = sa.stationary(all_f(state))
     if grasp is None:

@@ -519,7 +519,12 @@ async function startJob(kind) {
   const scene = state.scene;
   const type = $("goal-select").value;
   const goal = type === "combination" ? { type, combination: $("goal-combination").value.trim() } : { type };
-  const body = kind === "plan" ? { scene, goal, ...($("replay-check").checked ? { replay: true } : {}) } : { scene };
+  // the planner options ticked (POST /plans options; none: the request as before)
+  const options = {};
+  for (const box of document.querySelectorAll("#plan-options input[data-option]")) if (box.checked) options[box.dataset.option] = true;
+  const body = kind === "plan"
+    ? { scene, goal, ...($("replay-check").checked ? { replay: true } : {}), ...(Object.keys(options).length ? { options } : {}) }
+    : { scene };
   try {
     const job = await api("POST", kind === "plan" ? "/plans" : "/enumerations", body);
     if (state.scene !== scene) return;  // the scene changed while the job was being created

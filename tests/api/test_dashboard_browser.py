@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import io
 import itertools
+import json
 import shutil
 import time
 from collections.abc import Iterator
@@ -273,7 +274,16 @@ def test_docs_offline_and_job_state(tmp_path: Path) -> None:
             return [THREE.REVISION, typeof OrbitControls, typeof URDFLoader, typeof new URDFLoader().parse];
         }""")
         assert loaded == ["187", "function", "function", "function"], loaded
-        page.click("#plan-btn")
+        # two planner options ticked (box-object edges: the disk's plan is the same) go with the plan
+        page.click("#plan-options summary")
+        page.check("#plan-options input[data-option='contact_slides']")
+        page.check("#plan-options input[data-option='link_replacement']")
+        with page.expect_request(lambda r: r.method == "POST" and r.url.endswith("/plans")) as sent:
+            page.click("#plan-btn")
+        assert json.loads(sent.value.post_data or "{}")["options"] == {"contact_slides": True,
+                                                                       "link_replacement": True}
+        page.uncheck("#plan-options input[data-option='contact_slides']")  # the later plans without them
+        page.uncheck("#plan-options input[data-option='link_replacement']")
         expect(page.locator("#job-status[data-job-id]")).to_have_count(1, timeout=30_000)
         job_id = page.locator("#job-status").get_attribute("data-job-id")
         page.select_option("#example-select", "sphere_four_finger_palm.json")
