@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from analysis._types import Array
 from analysis.combination import CombinationParts, CombinationSummary, no_grasp_reason, summarize_with_member
-from analysis.contacts import GraspSystem
+from analysis.contacts import GraspSystem, selection
 from analysis.dafc import allowable_cone
 from analysis.dafc_family import (
     FamilyKinematics,
@@ -45,7 +45,7 @@ from analysis.dafc_family import (
     probe_motions,
 )
 from analysis.exceptions import CombinationError
-from analysis.motion import motion_dims
+from analysis.motion import motion_dims, motion_space
 from analysis.stationary_table import CLASS, stationary_verdicts
 from analysis.symmetry import symmetries
 
@@ -155,7 +155,8 @@ def _shared_dims(system: GraspSystem, kin: FamilyKinematics, rows: list[tuple[st
     for (c, _, a_bar), full in zip(rows, strict, strict=True):
         dim: int | None = a_bar
         if not full:
-            dirs = allowable_cone(CombinationParts.build(system, c).ms).all_directions()
+            # the motion space alone (eq. 7, 19): the statics and friction set are not needed here
+            dirs = allowable_cone(motion_space(system, selection(system, c))).all_directions()
             dim = int(np.linalg.matrix_rank(dirs, tol=1e-9)) if dirs.shape[0] else None
         exact = "S" not in c or (a_bar == 1 and not kin.slip_depends(c))
         out.append((dim, exact))
