@@ -479,9 +479,9 @@ class _Enumeration:
             # images of their members decide most of the others without probes or a search
             self._mirror(rows, pool)
             first, rest = self._representatives([c for c in rows if c not in self.results])
-            self._probe(first, pool)
+            self._probe([c for c in first if not self._direct(c)], pool)
             self._mirror(rows, pool)
-            self._probe([c for c in rest if c not in self.results], pool)
+            self._probe([c for c in rest if c not in self.results and not self._direct(c)], pool)
             self._mirror(rows, pool)
             first, rest = self._representatives([c for c in rows if c not in self.results])
             self._search(first, pool)
@@ -493,6 +493,14 @@ class _Enumeration:
             if limit is not None and self._reached(limit, rows[-1]):
                 break
         self._finish_shared(pool, workers)
+
+    def _direct(self, c: str) -> bool:
+        """Does ``c`` go to its own search without probes? Where its object moves along one line
+        (``a~ = 1``) and its slips do not depend on the redundancy, :func:`dafc_nonempty` decides
+        it exactly by the force LPs at the (at most two) generators of its allowable cone, at most
+        as many LPs as the probes' rounds, which mostly found no member there (most such rows of
+        the wrap are empty)."""
+        return self.dims[c][1] == 1 and ("S" not in c or not self.kin.slip_depends(c))
 
     def _search(self, todo: list[str], pool: ProcessPoolExecutor | None) -> None:
         """The own searches of ``todo``, committed in its order."""
