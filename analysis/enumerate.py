@@ -434,7 +434,8 @@ class _Enumeration:
         to D lowers the level), so the rows of one level depend only on the levels above and are
         decided together, in the worker processes when there are any: first the force LPs at the
         queued member motions of stronger rows (:func:`members_at`, batches of ``BATCH`` in the
-        strongest-first order), then the probe motions and then the own searches, each first for
+        strongest-first order), then the probe motions (not for the rows :meth:`_direct` sends
+        straight to their own search) and then the own searches, each first for
         one row of every orbit of the scene's symmetries and, after the images of the members found
         so far (:meth:`_mirror`), for the rest; results are committed in that order, so the table
         does not depend on the number of workers."""
