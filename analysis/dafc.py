@@ -1829,8 +1829,10 @@ def dafc_nonempty(oracle: DAFCOracle, extra_samples: int = 16, realisable: bool 
     generators = list(_dedupe(dirs))
     if not oracle.sel.s_index or (oracle.exact and ms.a_bar == 1):
         # without S-points: A_r minus a convex cone, decided on the generators; with a_bar = 1 the
-        # only directions are the (at most two) generators, each decided by the exact oracle
-        t = _prefer_realisable(oracle, generators, witness=False, prefer=realisable)
+        # only directions are the (at most two) generators, each decided by the exact oracle. The
+        # table (``realisable=False``) skips the relaxed screen: with one redundancy candidate per
+        # direction the force LP decides alone, and the screen's LP mostly did not prune
+        t = _prefer_realisable(oracle, generators, screen=realisable, witness=False, prefer=realisable)
         return (t, cone_dim, True) if t is not None else (None, 0, True)
     # (0) the centroid of the cone (the likeliest member), then seeded interior samples
     rng = np.random.default_rng(1)

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from analysis._types import Array
 from analysis.combination import CombinationParts, CombinationSummary, no_grasp_reason, summarize_with_member
-from analysis.contacts import GraspSystem
+from analysis.contacts import GraspSystem, selection
 from analysis.dafc import allowable_cone
 from analysis.dafc_family import (
     FamilyKinematics,
@@ -45,7 +45,7 @@ from analysis.dafc_family import (
     probe_motions,
 )
 from analysis.exceptions import CombinationError
-from analysis.motion import motion_dims
+from analysis.motion import motion_dims, motion_space
 from analysis.stationary_table import CLASS, stationary_verdicts
 from analysis.symmetry import symmetries
 
@@ -155,7 +155,8 @@ def _shared_dims(system: GraspSystem, kin: FamilyKinematics, rows: list[tuple[st
     for (c, _, a_bar), full in zip(rows, strict, strict=True):
         dim: int | None = a_bar
         if not full:
-            dirs = allowable_cone(CombinationParts.build(system, c).ms).all_directions()
+            # the motion space alone (eq. 7, 19): the statics and friction set are not needed here
+            dirs = allowable_cone(motion_space(system, selection(system, c))).all_directions()
             dim = int(np.linalg.matrix_rank(dirs, tol=1e-9)) if dirs.shape[0] else None
         exact = "S" not in c or (a_bar == 1 and not kin.slip_depends(c))
         out.append((dim, exact))
@@ -433,7 +434,8 @@ class _Enumeration:
         to D lowers the level), so the rows of one level depend only on the levels above and are
         decided together, in the worker processes when there are any: first the force LPs at the
         queued member motions of stronger rows (:func:`members_at`, batches of ``BATCH`` in the
-        strongest-first order), then the probe motions and then the own searches, each first for
+        strongest-first order), then the probe motions (not for the rows :meth:`_direct` sends
+        straight to their own search) and then the own searches, each first for
         one row of every orbit of the scene's symmetries and, after the images of the members found
         so far (:meth:`_mirror`), for the rest; results are committed in that order, so the table
         does not depend on the number of workers."""
@@ -478,9 +480,9 @@ class _Enumeration:
             # images of their members decide most of the others without probes or a search
             self._mirror(rows, pool)
             first, rest = self._representatives([c for c in rows if c not in self.results])
-            self._probe(first, pool)
+            self._probe([c for c in first if not self._direct(c)], pool)
             self._mirror(rows, pool)
-            self._probe([c for c in rest if c not in self.results], pool)
+            self._probe([c for c in rest if c not in self.results and not self._direct(c)], pool)
             self._mirror(rows, pool)
             first, rest = self._representatives([c for c in rows if c not in self.results])
             self._search(first, pool)
@@ -492,6 +494,14 @@ class _Enumeration:
             if limit is not None and self._reached(limit, rows[-1]):
                 break
         self._finish_shared(pool, workers)
+
+    def _direct(self, c: str) -> bool:
+        """Does ``c`` go to its own search without probes? Where its object moves along one line
+        (``a~ = 1``) and its slips do not depend on the redundancy, :func:`dafc_nonempty` decides
+        it exactly by the force LPs at the (at most two) generators of its allowable cone, at most
+        as many LPs as the probes' rounds, which mostly found no member there (most such rows of
+        the wrap are empty)."""
+        return self.dims[c][1] == 1 and ("S" not in c or not self.kin.slip_depends(c))
 
     def _search(self, todo: list[str], pool: ProcessPoolExecutor | None) -> None:
         """The own searches of ``todo``, committed in its order."""

@@ -26,6 +26,7 @@ from closure_helpers import (
 from analysis.combination import CombinationParts, summarize
 from analysis.contacts import GraspSystem, all_combinations, build_system
 from analysis.dafc import (
+    ALLOW_TOL,
     SEMANTICS,
     DAFCOracle,
     DirectionTest,
@@ -810,3 +811,52 @@ def test_test_many_verdicts_agree_with_an_independent_lp() -> None:
                 assert chk.work == -np.inf
             checked[t.member] += 1
     assert checked[True] >= 10 and checked[False] >= 10, checked
+
+
+def test_table_decides_exact_one_direction_rows_without_the_relaxed_screen() -> None:
+    """The table (``dafc_nonempty(..., realisable=False)``) decides a combination with S-points whose
+    slips do not depend on the redundancy and whose object moves along one line (``a~ = 1``) by the
+    force LPs at its (at most two) generators alone, without the relaxed screen's LP: the same
+    verdict, dimension and exactness as the screened report path, the same membership at each
+    generator, and the independent scipy LP (tests/helpers/independent_dafc.py) agrees at each
+    generator's motion (a member where the table's test says so, none where it does not)."""
+    import json
+
+    from closure_helpers import EXAMPLES
+    from independent_dafc import check_member
+
+    system = example_system("sphere_four_finger_wrap")
+    data = json.loads((EXAMPLES / "sphere_four_finger_wrap.json").read_text())
+    rng = np.random.default_rng(17)
+    members = non_members = rows = 0
+    for _ in range(3000):
+        c = "".join(rng.choice(list("FSD"), system.L))
+        parts = CombinationParts.build(system, c)
+        oracle = parts.oracle()
+        if not oracle.sel.s_index or not oracle.exact or parts.ms.a_bar != 1:
+            continue
+        rows += 1
+        table = dafc_nonempty(oracle, realisable=False)
+        report = dafc_nonempty(parts.oracle(), realisable=True)
+        assert (table[0] is None, table[1], table[2]) == (report[0] is None, report[1], report[2]), c
+        ms = parts.ms
+        for u in allowable_cone(ms).all_directions():
+            u = u / np.linalg.norm(u)
+            bare = oracle.test(ms.Lambda_r_t @ u, screen=False, witness=False)
+            screened = parts.oracle().test(ms.Lambda_r_t @ u, screen=True, witness=False)
+            assert bare.member == screened.member, (c, u)
+            if bare.zeta_c is None:
+                continue  # not allowable: no motion of the combination has this direction
+            motion = ms.Phi_full @ bare.zeta_c  # (M + D,) the motion the force LP was solved at
+            chk = check_member(data, c, motion[:system.M], motion[system.M:])
+            # the kinematics hold (a D-point whose row vanishes on the motion space may move by the
+            # product's allowability tolerance), and the independent force LP agrees on the work
+            size = float(np.linalg.norm(motion))
+            assert all("(D) penetrates" in e and float(e.rsplit(": ", 1)[1]) <= ALLOW_TOL * size
+                       for e in chk.motion_errors), (c, chk.motion_errors)
+            assert (chk.work > chk.work_min) == bare.member, (c, u, chk.work, chk.work_min, bare.reason)
+            members += bare.member
+            non_members += not bare.member
+        if rows >= 16:
+            break
+    assert rows >= 16 and members > 0 and non_members > 0, (rows, members, non_members)
