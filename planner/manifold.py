@@ -668,7 +668,8 @@ class ContactManifold:
             out[self._roll0: self._plane0] = self._rolling_rows(x)
         for k, (_, _, n) in enumerate(self.plane_rolls):  # dp + r n x w: rolling on a plane
             out[self._plane0 + 3 * k: self._plane0 + 3 * k + 3] = s[:3] + self.radius * np.cross(n, s[3:])
-        out[self._axis0: self._slide0] = self.axis_rows @ s[3:]  # a cylinder turns about its axis
+        if self.axis_rows.shape[0]:  # a cylinder turns about its axis
+            out[self._axis0: self._slide0] = self.axis_rows @ s[3:]
         for k, ref in enumerate(self.sliding):  # S-points: the gap to the disk/sphere is zero
             if k not in self._row_of:
                 continue
@@ -783,7 +784,8 @@ class ContactManifold:
             r = slice(self._plane0 + 3 * k, self._plane0 + 3 * k + 3)
             J[r, self.M: self.M + 3] = np.eye(3)
             J[r, self.M + 3:] = self.radius * skew(n)
-        J[self._axis0: self._slide0, self.M + 3:] = self.axis_rows
+        if self.axis_rows.shape[0]:
+            J[self._axis0: self._slide0, self.M + 3:] = self.axis_rows
         self._sliding_jacobian(J, q, s, pose)
         J[self._base:, self.M:] = self.complement.T
         return J
