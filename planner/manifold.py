@@ -25,7 +25,7 @@ from analysis.kinematics import BodyRef, HandKinematics, SerialChain
 from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
 from analysis.rotations import skew
-from analysis.scene import Box, Disk, Polygon, Scene, Sphere
+from analysis.scene import Box, Cylinder, Disk, Polygon, Scene, Sphere
 from planner.state import GraspState
 
 _EYE3 = np.eye(3)
@@ -113,7 +113,20 @@ class ContactManifold:
     of the glued point's ``[-I, -r [n]x]`` (its object point ``-r n`` from the centre), so the
     tangent space at ``s = 0`` is still the motion space. A glued point pivots the sphere about
     it, sinking it ``r (1 - cos theta)`` into the plane. :meth:`plane_rolling_contact` gives the
-    contact after a motion."""
+    contact after a motion.
+
+    With ``rolling=True`` for a 3-D cylinder (radius ``r``, axis the object's z axis, ``a_0`` in
+    the world at the start) lying on a flat face of a fixed body (``a_0 . n = 0``), each sticking
+    contact on its curved surface there (the ends of its line contact) has the same three rows
+    ``dp + r n x w = 0``, and the cylinder has two more, ``P w = 0`` (``P`` ``(2, 3)`` orthonormal,
+    orthogonal to ``a_0``): it turns about its own axis only, ``R = exp(theta a_0) R_0``, which
+    keeps the axis at ``a_0``, and its centre moves by ``r theta a_0 x n``. Rolling about a fixed
+    axis is holonomic, so these rows hold exactly along any path: every point of the manifold is
+    the cylinder rolled by ``theta`` without slipping (its contact line at rest, every point of it:
+    ``v + omega x (z a_0 - r n) = 0``), the contact line moving by ``r theta`` on the plane and on
+    the cylinder. The rows' Jacobian ``[0, I, r [n]x]`` and ``[0, 0, P]`` has rank 5, the row space
+    of the two glued ends' (``-I, [y_i]x`` with ``y_i = z_i a_0 - r n``: their difference forces
+    ``omega || a_0``), so the tangent space at ``s = 0`` is still the motion space."""
 
     def __init__(self, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
                  sliding: Sequence[int] = (), scene: Scene | None = None, direction: Array | None = None,
@@ -129,20 +142,24 @@ class ContactManifold:
         #: the face's outward unit normal ``n`` ``(3,)``, world)
         self.plane_rolls: list[tuple[int, BodyRef, Array]] = []
         self.radius = 0.0
+        #: a cylinder's axis in the world at the start ``(3,)`` (None: not a cylinder)
+        self.axis: Array | None = None
         if rolling:
-            if scene is None or not isinstance(scene.object.shape, Disk | Sphere) or (
+            if scene is None or not isinstance(scene.object.shape, Disk | Sphere | Cylinder) or (
                     (self.dim == 2) != isinstance(scene.object.shape, Disk)):
-                raise SceneError(("object", "shape"), "rolling contacts are followed for 2-D disk and 3-D sphere "
-                                 "objects only (pass the scene of a disk or a sphere)")
+                raise SceneError(("object", "shape"), "rolling contacts are followed for 2-D disk, 3-D sphere and "
+                                 "3-D cylinder objects only (pass the scene of a disk, a sphere or a cylinder)")
             self.scene = scene
             self.radius = float(scene.object.shape.radius)
+            if isinstance(scene.object.shape, Cylinder):
+                self.axis = self.start.rotation[:, 2].copy()
         for i in sticking:
             c = state.contacts[i]
             ref = hand.resolve_body(c.body)
             assert ref is not None
             if rolling and self.dim == 3 and ref.finger is None:
                 n = self._fixed_face_normal(ref, state.world_point(i))
-                if n is not None:
+                if n is not None and self._rolls_on_face(i, n):
                     self.plane_rolls.append((i, ref, n))
                     continue
             if rolling and self.dim == 2 and ref.finger is not None:
@@ -201,7 +218,13 @@ class ContactManifold:
             self.complement = Uc[:, sv > 1e-9]  # (D, k)
         self._roll0 = self.dim * len(self.items)  # first rolling row
         self._plane0 = self._roll0 + 2 * len(self.rolls)  # first row of a sphere rolling on a plane
-        self._slide0 = self._plane0 + 3 * len(self.plane_rolls)  # first sliding row
+        #: a cylinder rolling on a plane: ``P`` ``(2, 3)``, an orthonormal basis of the directions
+        #: orthogonal to its axis at the start; the rows ``P w = 0`` keep it turning about that axis
+        self.axis_rows = np.zeros((0, 3))
+        if self.axis is not None and self.plane_rolls:
+            self.axis_rows = np.linalg.svd(self.axis[None, :])[2][1:]  # (2, 3)
+        self._axis0 = self._plane0 + 3 * len(self.plane_rolls)  # first row of a cylinder's axis
+        self._slide0 = self._axis0 + self.axis_rows.shape[0]  # first sliding row
         #: the row of each sliding contact (none for a link's contact at the joint with a link that
         #: sticks to the same face, :meth:`_implied_at_joint`)
         self._row_of: dict[int, int] = {}
@@ -466,13 +489,32 @@ class ContactManifold:
         n = np.asarray(cone.generators[0], dtype=float)
         return n / np.linalg.norm(n)
 
+    def _rolls_on_face(self, i: int, n: Array) -> bool:
+        """Whether sticking contact ``i`` on a fixed face of outward normal ``n`` ``(3,)`` rolls: always
+        for a sphere; for a cylinder where it lies on the face (its axis parallel to the face within
+        1e-9) and the contact is on its curved surface (the object point ``r`` off the axis within
+        :data:`~analysis.loader.GEOMETRY_TOL`; a cylinder standing on an end face keeps its glued
+        points, exact there)."""
+        if self.axis is None:
+            return True
+        po = np.asarray(self.state.contacts[i].point_object, dtype=float)
+        return abs(float(self.axis @ n)) <= 1e-9 and abs(float(np.linalg.norm(po[:2])) - self.radius) <= GEOMETRY_TOL
+
+    def plane_offset(self, k: int) -> float:
+        """The axial coordinate ``z_k`` (object frame) of rolling contact ``k`` of a cylinder on a plane
+        (where along its line contact it lies: it keeps it while rolling); 0 for a sphere."""
+        if self.axis is None:
+            return 0.0
+        return float(self.state.contacts[self.plane_rolls[k][0]].point_object[2])
+
     def plane_rolling_contact(self, k: int, x: Array) -> tuple[int, Array, Array, Array]:
-        """Rolling contact ``k`` of a sphere on a plane at ``x``: its contact index, the touching
-        point ``p - r n`` (world ``(3,)``, on the plane), the point on the sphere and its inward
-        normal (object frame ``(3,)``)."""
+        """Rolling contact ``k`` of a sphere or a cylinder on a plane at ``x``: its contact index, the
+        touching point ``p + z_k a - r n`` (world ``(3,)``, on the plane; ``a`` the cylinder's axis,
+        ``z_k`` :meth:`plane_offset`, 0 for a sphere), the point on the object and its inward normal
+        (object frame ``(3,)``)."""
         pose = self.pose(x[self.M:])
         i, _, n = self.plane_rolls[k]
-        y = pose.position - self.radius * n
+        y = pose.position - self.radius * n + self.plane_offset(k) * pose.rotation[:, 2]
         return i, y, pose.to_local(y), pose.R_d.T @ n
 
     def sliding_contact(self, k: int, x: Array) -> tuple[Array, Array, Array]:
@@ -626,6 +668,8 @@ class ContactManifold:
             out[self._roll0: self._plane0] = self._rolling_rows(x)
         for k, (_, _, n) in enumerate(self.plane_rolls):  # dp + r n x w: rolling on a plane
             out[self._plane0 + 3 * k: self._plane0 + 3 * k + 3] = s[:3] + self.radius * np.cross(n, s[3:])
+        if self.axis_rows.shape[0]:  # a cylinder turns about its axis
+            out[self._axis0: self._slide0] = self.axis_rows @ s[3:]
         for k, ref in enumerate(self.sliding):  # S-points: the gap to the disk/sphere is zero
             if k not in self._row_of:
                 continue
@@ -740,6 +784,8 @@ class ContactManifold:
             r = slice(self._plane0 + 3 * k, self._plane0 + 3 * k + 3)
             J[r, self.M: self.M + 3] = np.eye(3)
             J[r, self.M + 3:] = self.radius * skew(n)
+        if self.axis_rows.shape[0]:
+            J[self._axis0: self._slide0, self.M + 3:] = self.axis_rows
         self._sliding_jacobian(J, q, s, pose)
         J[self._base:, self.M:] = self.complement.T
         return J

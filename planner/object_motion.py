@@ -50,7 +50,7 @@ from analysis.kinematics import BodyRef, HandKinematics
 from analysis.loader import GEOMETRY_TOL
 from analysis.pose import Pose
 from analysis.rotations import matrix_to_rotvec
-from analysis.scene import Disk, Scene, Sphere
+from analysis.scene import Cylinder, Disk, Scene, Sphere
 from planner.budget import CheckBudget
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel
 from planner.ik import joint_limits
@@ -85,8 +85,10 @@ def rolls_on_planes(scene: Scene) -> bool:
     object motions (:class:`~planner.manifold.ContactManifold` ``rolling=True``: the sphere turns
     about a fixed axis while its centre moves by ``r omega x n``, the contact point moving by ``r``
     times the turn on the plane and on the sphere)? Always for a sphere with fixed bodies: an F
-    contact on a plane is a rolling one (its glued point would sink the sphere into the plane)."""
-    return scene.dim == 3 and isinstance(scene.object.shape, Sphere) and bool(scene.fixed_bodies)
+    contact on a plane is a rolling one (its glued point would sink the sphere into the plane). And
+    for a 3-D cylinder: its contacts on its curved surface with a face its axis lies parallel to
+    roll about its axis (exact: holonomic), the others stay glued."""
+    return scene.dim == 3 and isinstance(scene.object.shape, Sphere | Cylinder) and bool(scene.fixed_bodies)
 
 
 def motion_manifold(scene: Scene, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
@@ -546,8 +548,9 @@ ROLL_SLIP_TOL = 1e-6
 
 def rolling_slip(man: ContactManifold, S: Array) -> float:
     """The slip along the object displacement path ``S`` ``(n, D)`` (the ``s`` of ``man``) of every
-    sphere rolling on a plane (:attr:`ContactManifold.plane_rolls`): per segment ``k`` the
-    sphere's material point at the contact moves by ``dp_k - r omega_k x n`` (``omega_k =
+    sphere or cylinder rolling on a plane (:attr:`ContactManifold.plane_rolls`): per segment ``k``
+    the object's material point at the contact (``y = z a_k - r n`` from the centre, ``z`` the
+    cylinder contact's axial offset, 0 for a sphere) moves by ``dp_k + omega_k x y`` (``omega_k =
     log(R_{k+1} R_k^T)``, a constant twist over the segment), zero when it rolls; the largest sum
     of their lengths over the path among the contacts (0 without such contacts). Rays
     ``s = t dr`` roll exactly; other paths of the manifold slip at second order (rolling is
@@ -556,11 +559,13 @@ def rolling_slip(man: ContactManifold, S: Array) -> float:
         return 0.0
     poses = [man.pose(s) for s in np.asarray(S, dtype=float)]
     worst = 0.0
-    for _, _, n in man.plane_rolls:
+    for k, (_, _, n) in enumerate(man.plane_rolls):
+        z = man.plane_offset(k)  # a cylinder's contact: its offset along the axis (0 for a sphere)
         total = 0.0
         for a, b in itertools.pairwise(poses):
             omega = matrix_to_rotvec(b.rotation @ a.rotation.T)  # (3,)
-            total += float(np.linalg.norm(b.position - a.position - man.radius * np.cross(omega, n)))
+            arm = z * a.rotation[:, 2] - man.radius * n  # (3,) the contact from the centre
+            total += float(np.linalg.norm(b.position - a.position + np.cross(omega, arm)))
         worst = max(worst, total)
     return worst
 

@@ -1087,7 +1087,12 @@ def _object_motion(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, st
     options, T = run.options, run.params.ramp_time
     busy = _fingers_touching(hand, st.contacts_before)
     free = _mask(hand, set(range(len(hand.fingers))) - busy)
-    dist = float(np.linalg.norm(st.object_path[-1] - st.object_path[0]))
+    # the planned distance in the measure braking() takes of the simulated one (the shortest
+    # displacement: dp and log(R R_0^T)); the pose vectors' difference is not it where the object
+    # starts turned (a cylinder lying on its side, -90 degrees about x: 12 % more turn than it rolls)
+    d = pose0.dim
+    dist = float(np.linalg.norm(Pose.from_vector(st.object_path[-1], d).shortest_displacement_from(
+        Pose.from_vector(st.object_path[0], d))))
     phi = joint_speed_ratio(st.q_path, st.object_path)
     run.joint_damping(joint_speed_factor(run.s, phi))  # the analysis' fingers are massless: sim.mjcf.damping
     frac_obj = arc_fractions(st.object_path)

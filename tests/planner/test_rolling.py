@@ -153,12 +153,13 @@ def test_disk_rolls_round_the_end_cap() -> None:
 
 
 def test_rolling_needs_a_planar_disk_or_a_sphere() -> None:
-    """Rolling is followed for 2-D disks (on links' sides) and 3-D spheres (on fixed bodies' faces,
-    tests/planner/test_rolling_3d.py): a box refuses it, and a sphere's contact on a finger link
+    """Rolling is followed for 2-D disks (on links' sides), 3-D spheres (on fixed bodies' faces,
+    tests/planner/test_rolling_3d.py) and 3-D cylinders (tests/planner/test_rolling_cylinder.py):
+    a box refuses it, and a sphere's contact on a finger link
     keeps its glued point."""
     box = load_scene(EXAMPLES / "panda_forearm_box.json")
     hand = HandKinematics.from_scene(box)
-    with pytest.raises(SceneError, match="2-D disk and 3-D sphere"):
+    with pytest.raises(SceneError, match="2-D disk, 3-D sphere and 3-D cylinder"):
         ContactManifold(hand, state_from_scene(box, hand), [0], scene=box, rolling=True)
     scene = load_scene(EXAMPLES / "sphere_four_finger_palm.json")
     hand = HandKinematics.from_scene(scene)
