@@ -235,14 +235,7 @@ class FamilyKinematics:
             key = (g, letters)
             hit = self._slip_cache.get(key)
             if hit is None:
-                rows: list[Array] = []
-                for i, s in zip(C, letters, strict=True):
-                    J = sy.J_blocks[i][:, Q]  # (d, |Q|)
-                    if s == "F":
-                        rows.extend(J)
-                    elif s in "SN":
-                        rows.append(sy.normals[i] @ J)
-                Z = null_space(np.array(rows)) if rows else np.eye(len(Q))  # (|Q|, r)
+                Z = _group_null_space(sy, C, Q, letters)  # (|Q|, r)
                 J_s = np.vstack([sy.J_blocks[i][:, Q] for i, s in zip(C, letters, strict=True) if s == "S"])
                 hit = bool(Z.shape[1] and np.abs(J_s @ Z).max() > 1e-9)
                 self._slip_cache[key] = hit
@@ -362,14 +355,7 @@ class FamilyKinematics:
         C, Q = self.groups[g]
         out: Array | None = None
         if Q:
-            rows = []
-            for i, s in zip(C, letters, strict=True):
-                J = sy.J_blocks[i][:, Q]  # (d, |Q|)
-                if s == "F":
-                    rows.extend(J)
-                elif s in "SN":
-                    rows.append(sy.normals[i] @ J)
-            Z = null_space(np.array(rows)) if rows else np.eye(len(Q))  # (|Q|, r)
+            Z = _group_null_space(sy, C, Q, letters)  # (|Q|, r)
             R = np.array([sy.normals[i] @ sy.J_blocks[i][:, Q] for i in stuck]) @ Z  # (k, r)
             y = _unit_push(R)
             if y is not None:
@@ -701,3 +687,17 @@ def probe_motions(kin: FamilyKinematics, combinations: list[str]) -> list[list[A
                 found.append(v)
         out.append(found)
     return out
+
+
+def _group_null_space(sy: GraspSystem, C: list[int], Q: list[int], letters: str) -> Array:
+    """``(|Q|, r)``: the joint motions of a finger group's joints ``Q`` that keep its contacts ``C``
+    in the states ``letters`` with the object still (F: the contact's whole velocity zero, S and N:
+    its normal velocity zero; D: free), a basis of the null space of those rows."""
+    rows: list[Array] = []
+    for i, s in zip(C, letters, strict=True):
+        J = sy.J_blocks[i][:, Q]  # (d, |Q|)
+        if s == "F":
+            rows.extend(J)
+        elif s in "SN":
+            rows.append(sy.normals[i] @ J)
+    return null_space(np.array(rows)) if rows else np.eye(len(Q))

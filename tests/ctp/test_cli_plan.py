@@ -145,8 +145,10 @@ def test_hold_rate_default_is_the_replays_and_bad_rates_exit_2(tmp_path) -> None
         assert r.exit_code == 2 and "hold-rate" in r.output and "Traceback" not in r.output, (bad, r.output)
 
 
-def test_ctp_plan_link_replacement_reaches_the_planner(monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    """``--link-replacement`` turns on the planner's link re-placement edges (off without it)."""
+@pytest.mark.parametrize("name", ["link_replacement", "contact_slides", "link_sliding", "separate_finger_contacts"])
+def test_ctp_plan_switch_flags_reach_the_planner(monkeypatch, name: str) -> None:  # type: ignore[no-untyped-def]
+    """``--link-replacement``, ``--contact-slides``, ``--link-sliding`` and
+    ``--separate-finger-contacts`` each turn on their ``PlannerOptions`` switch (off without it)."""
     import planner
     from planner.options import PlannerOptions
 
@@ -159,10 +161,10 @@ def test_ctp_plan_link_replacement_reaches_the_planner(monkeypatch) -> None:  # 
 
     monkeypatch.setattr(planner, "plan", spy)
     scene = str(Path(__file__).resolve().parents[2] / "examples" / "planar_disk_envelope.json")
-    for flag, want in (([], False), (["--link-replacement"], True)):
+    for flag, want in (([], False), (["--" + name.replace("_", "-")], True)):
         r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
         assert r.exit_code in (0, 1), r.output
-        assert seen[-1] is not None and seen[-1].link_replacement is want
+        assert seen[-1] is not None and getattr(seen[-1], name) is want
 
 
 @pytest.mark.slow
@@ -181,31 +183,6 @@ def test_ctp_plan_no_sliding_rolls_the_sphere(tmp_path) -> None:  # type: ignore
         kinds[flag] = [s["combination"] for s in steps if s["kind"] == "object_motion"]
     assert kinds["--no-sliding"] and all(c == "FF" for c in kinds["--no-sliding"])
     assert any("S" in c for c in kinds["--sliding"])
-
-
-def test_ctp_plan_contact_slides_reaches_the_planner(monkeypatch) -> None:  # type: ignore[no-untyped-def]
-    """``--contact-slides`` turns on the planner's slide edges (off without it)."""
-    import planner
-    from planner.options import PlannerOptions
-
-    seen: list[PlannerOptions | None] = []
-    real = planner.plan
-
-    def spy(*args, options=None, **kwargs):  # type: ignore[no-untyped-def]
-        seen.append(options)
-        return real(*args, options=options, max_expansions=1, **kwargs)
-
-    monkeypatch.setattr(planner, "plan", spy)
-    scene = str(Path(__file__).resolve().parents[2] / "examples" / "planar_disk_envelope.json")
-    for flag, want in (([], False), (["--contact-slides"], True)):
-        r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
-        assert r.exit_code in (0, 1), r.output
-        assert seen[-1] is not None and seen[-1].contact_slides is want
-    for name in ("link_sliding", "separate_finger_contacts"):  # the other switches, off by default
-        assert getattr(seen[-1], name) is False
-        r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", "--" + name.replace("_", "-")])
-        assert r.exit_code in (0, 1), r.output
-        assert getattr(seen[-1], name) is True
 
 
 @pytest.mark.slow

@@ -9,15 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from closure_helpers import EXAMPLES
+from roll_helpers import roll_and_replay
 
-from analysis.loader import load_scene
-from analysis.pose import Pose
 from analysis.rotations import matrix_to_rotvec
-from planner import Goal, plan
-from planner.options import PlannerOptions
-from planner.verify import verify_plan
-from sim.plan_replay import simulate_plan
 
 R = 0.5  # the sphere's radius
 TABLE = "world"  # MuJoCo's body of the fixed bodies' geoms (the table is the only one)
@@ -25,18 +19,9 @@ TABLE = "world"  # MuJoCo's body of the fixed bodies' geoms (the table is the on
 
 @pytest.mark.slow
 def test_sphere_roll_replays_with_the_rolling_kinematics() -> None:
-    scene = load_scene(EXAMPLES / "sphere_table_roll.json")
-    p = plan(scene, Goal(type="displacement", displacement=[0.05, 0.0, 0.0, 0.0, 0.0, 0.0], position_tolerance=0.005,
-                         rotation_tolerance="free"), options=PlannerOptions(sliding_motions=False))
-    assert p.found and verify_plan(scene, p) == [], p.reason
-    sim = simulate_plan(scene, p)
-    assert not sim.dropped, sim.drop_reason
-    err = sim.error
-    assert err.relative_position <= 0.05 and err.relative_rotation <= 0.05, sim.to_json()
-    assert sim.ok
+    _, p, sim, p0, p1 = roll_and_replay("sphere_table_roll")
     assert sim.start_contacts is not None and sim.final_contacts is not None
     assert TABLE in sim.start_contacts and TABLE in sim.final_contacts, "the sphere left the table"
-    p0, p1 = Pose.from_vector(sim.start_pose, 3), Pose.from_vector(sim.simulated_final_pose, 3)
     turn = matrix_to_rotvec(p1.rotation @ p0.rotation.T)  # (3,) MuJoCo's turn of the sphere
     assert abs(float(turn[2])) <= 0.01 * float(np.linalg.norm(turn))  # no spin about the table's normal
     theta = float(np.linalg.norm(turn))
