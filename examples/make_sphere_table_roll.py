@@ -22,8 +22,6 @@ F contact that rolls (:func:`planner.object_motion.rolls_on_planes`).
 
 from __future__ import annotations
 
-import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -33,7 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from analysis.loader import load_scene  # noqa: E402
+from scene_maker import pushing_finger, write_or_check  # noqa: E402
 
 OUT = ROOT / "examples" / "sphere_table_roll.json"
 R = 0.5  # sphere radius
@@ -45,24 +43,7 @@ MU = 0.5
 
 def build_scene() -> dict[str, Any]:
     centre = np.array([0.0, 0.0, R])
-    out = np.array([-np.cos(ELEVATION), 0.0, np.sin(ELEVATION)])  # outward normal at the contact
-    tip = centre + R * out
-    joint2 = tip + L2 * out  # the last link points along the inward normal -out
-    v1 = joint2 - BASE
-    L1 = float(np.linalg.norm(v1))
-    th1 = float(np.arctan2(v1[0], v1[2]))  # the first link's lean from the vertical towards +x
-    th2 = float(np.arctan2(-out[0], -out[2]))  # the last link's
-    finger = {
-        "name": "f",
-        "base": {"position": [float(v) for v in BASE], "quat_wxyz": [1.0, 0.0, 0.0, 0.0]},
-        "joints": [
-            {"axis": [0.0, 0.0, 1.0], "origin": [0.0, 0.0, 0.0]},
-            {"axis": [0.0, 1.0, 0.0], "origin": [0.0, 0.0, 0.0]},
-            {"axis": [0.0, 1.0, 0.0], "origin": [0.0, 0.0, round(L1, 12)]},
-        ],
-        "tip": [0.0, 0.0, L2],
-        "q": [0.0, round(th1, 12), round(th2 - th1, 12)],
-    }
+    finger, tip, out = pushing_finger(centre, R, ELEVATION, BASE, L2)
     return {
         "name": "sphere-table-roll",
         "description": (
@@ -85,17 +66,7 @@ def build_scene() -> dict[str, Any]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="compare with the committed scene")
-    args = parser.parse_args()
-    text = json.dumps(build_scene(), indent=2) + "\n"
-    if args.check:
-        same = OUT.read_text() == text
-        print(f"{OUT.relative_to(ROOT)} is {'up to date' if same else 'OUT OF DATE'}")
-        sys.exit(0 if same else 1)
-    OUT.write_text(text)
-    load_scene(OUT)  # validates: contact points on the link tip, the sphere and the table, normals inward
-    print(f"wrote {OUT.relative_to(ROOT)}")
+    write_or_check(OUT, build_scene, (__doc__ or "").splitlines()[0])
 
 
 if __name__ == "__main__":

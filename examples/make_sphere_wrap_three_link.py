@@ -22,8 +22,6 @@ wrap. The external wrench is a unit weight at the sphere's centre; mu 0.5 everyw
 
 from __future__ import annotations
 
-import argparse
-import json
 import sys
 from pathlib import Path
 from typing import Any
@@ -33,7 +31,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from analysis.loader import load_scene  # noqa: E402
+from scene_maker import write_or_check  # noqa: E402
 
 OUT = ROOT / "examples" / "sphere_wrap_three_link.json"
 R = 0.5  # sphere radius
@@ -102,17 +100,7 @@ def build_scene() -> dict[str, Any]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="compare with the committed scene")
-    args = parser.parse_args()
-    text = json.dumps(build_scene(), indent=2) + "\n"
-    if args.check:
-        same = OUT.read_text() == text
-        print(f"{OUT.relative_to(ROOT)} is {'up to date' if same else 'OUT OF DATE'}")
-        sys.exit(0 if same else 1)
-    OUT.write_text(text)
-    load_scene(OUT)  # validates: contact points on the links and the sphere, normals inward
-    print(f"wrote {OUT.relative_to(ROOT)}")
+    write_or_check(OUT, build_scene, (__doc__ or "").splitlines()[0])
 
 
 if __name__ == "__main__":
