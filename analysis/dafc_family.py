@@ -306,14 +306,8 @@ class FamilyKinematics:
         zero; undecided, False, near the threshold of a zero row), added by :func:`_strict`'s steps;
         batched SVDs of the zero-padded ``A_c`` and pseudo-inverses of the padded push rows."""
         sy = self.system
-        R, L = letters.shape
         d, n = sy.d, sy.M + sy.D
-        blocks = np.zeros((L, 3, d, n))
-        blocks[:, 0] = self.A
-        blocks[:, 1, 0] = self.normal_rows
-        mats = blocks[np.arange(L)[None, :], letters].reshape(R, L * d, n)  # (R, L d, n) zero-padded A_c
-        _, s1, Vt = np.linalg.svd(mats, full_matrices=True)  # Vt (R, n, n)
-        rank = np.sum(s1 > RANK_RTOL * np.maximum(1.0, s1[:, :1]), axis=1)  # (R,)
+        Vt, rank = _padded_null_spaces(self.A, self.normal_rows, letters, d, n)  # (R, n, n), (R,)
         null_cols = np.arange(n)[None, :] >= rank[:, None]  # (R, n) rows of Vt spanning null(A_c)
         a = n - rank  # (R,)
         Rall = np.einsum("ln,rjn->rlj", self.normal_rows, Vt) * null_cols[:, None, :]  # (R, L, n)
@@ -483,12 +477,7 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
     F0 = sc.force
     code = {"F": 0, "S": 1, "N": 1, "D": 2}
     letters = np.array([[code[s] for s in c] for c, _ in pairs], dtype=np.intp)  # (B, L)
-    blocks = np.zeros((L, 3, d, n))
-    blocks[:, 0] = kin.A
-    blocks[:, 1, 0] = kin.normal_rows
-    mats = blocks[np.arange(L)[None, :], letters].reshape(B, L * d, n)  # (B, L d, n) zero-padded A_c
-    _, s1, Vt = np.linalg.svd(mats, full_matrices=True)  # Vt (B, n, n)
-    rank = np.sum(s1 > RANK_RTOL * np.maximum(1.0, s1[:, :1]), axis=1)  # (B,)
+    Vt, rank = _padded_null_spaces(kin.A, kin.normal_rows, letters, d, n)  # (B, n, n), (B,)
     null_rows = np.arange(n)[None, :] >= rank[:, None]  # (B, n) rows of Vt spanning null(A_c)
     obj = Vt[:, :, M:] * null_rows[:, :, None]  # (B, n, D) rows: the object parts of null(A_c)
     _, s2, V2 = np.linalg.svd(obj, full_matrices=True)  # V2 (B, D, D)
@@ -701,3 +690,19 @@ def _group_null_space(sy: GraspSystem, C: list[int], Q: list[int], letters: str)
         elif s in "SN":
             rows.append(sy.normals[i] @ J)
     return null_space(np.array(rows)) if rows else np.eye(len(Q))
+
+
+def _padded_null_spaces(A: Array, normal_rows: Array, letters: NDArray[np.intp], d: int,
+                        n: int) -> tuple[Array, Array]:
+    """For each row of ``letters`` (``(R, L)``: 0 F, 1 S or N, 2 D), the SVD basis ``Vt`` ``(R, n, n)``
+    of its constraint matrix ``A_c`` (each contact's ``d`` rows of ``A`` for F, its normal row for S
+    and N, nothing for D; zero-padded to ``(L d, n)`` so that all rows are one batched SVD) and its
+    rank ``(R,)``: the rows of ``Vt`` from ``rank`` on span null(``A_c``)."""
+    R, L = letters.shape
+    blocks = np.zeros((L, 3, d, n))
+    blocks[:, 0] = A
+    blocks[:, 1, 0] = normal_rows
+    mats = blocks[np.arange(L)[None, :], letters].reshape(R, L * d, n)  # (R, L d, n) zero-padded A_c
+    _, s1, Vt = np.linalg.svd(mats, full_matrices=True)  # Vt (R, n, n)
+    rank = np.sum(s1 > RANK_RTOL * np.maximum(1.0, s1[:, :1]), axis=1)  # (R,)
+    return Vt, rank

@@ -50,7 +50,7 @@ from analysis.regrasp import sliding_equilibrium
 from analysis.scene import Box, Scene
 from planner.collision import DENSE_STEP, path_clearance_certified
 from planner.ik import joint_limits
-from planner.link_replace import _flat_rows, _inside_face, kept_contacts, transfer_allowance
+from planner.link_replace import _equations, _inside_face, kept_contacts, transfer_allowance
 from planner.nodes import GraphNodes
 from planner.state import GraspContact, GraspState, StateAnalysis, all_f
 from planner.transition import SlideFigures, Transition
@@ -146,15 +146,10 @@ def slide_path(nodes: GraphNodes, state: GraspState, i: int, u: Array, length: f
         q = np.array(q, dtype=float)
         res = np.inf
         for _ in range(ITERS):
-            errs, rows = [], []
             e, J = _slide_rows(hand, ref, c.point_body, q, x0, n, u, s, heights)
-            errs.append(e)
-            rows.append(J[:, sl])
-            for k in kept:
-                ek, Jk = _flat_rows(hand, k.ref, k.point_body, q, k.target, k.ends)
-                errs.append(ek)
-                rows.append(Jk[:, sl])
-            err = np.concatenate(errs)
+            ek, Jk = _equations(hand, q, None, kept, sl)  # the arm's kept contacts, as a re-placement holds them
+            err = np.concatenate([e, ek])
+            rows = [J[:, sl], Jk]
             res = float(np.max(np.abs(err)))
             if res <= RESIDUAL_TOL:
                 break
