@@ -47,8 +47,7 @@ from analysis.pose import Pose
 from analysis.rotations import matrix_to_rotvec, skew
 from analysis.scene import Scene, Sphere
 from planner.manifold import PROJECTION_RCOND, ContactManifold, _left_jacobian_so3
-from planner.object_motion import motion_manifold, rolled_contacts
-from planner.state import GraspContact, GraspState
+from planner.state import GraspState
 
 #: the foot of the sphere's centre must lie this fraction of the axis away from its ends for a
 #: contact to roll on the link's side (at an end cap the contact is a sphere on a sphere)
@@ -58,15 +57,17 @@ LINK_ROLL_SLIP_TOL = 1e-6
 
 
 def link_rolls(hand: HandKinematics, scene: Scene, state: GraspState, sticking: Sequence[int]) -> tuple[int, ...]:
-    """The sticking contacts of a 3-D sphere object on the side of a capsule finger link (the foot
-    of the centre on the link's axis strictly inside it, :data:`SIDE_MARGIN`): these roll. Links
-    with URDF collision shapes (not capsules) and fixed bodies are left out."""
+    """The sticking contacts of a 3-D sphere object on the side of a capsule finger link of positive
+    radius (the foot of the centre on the link's axis strictly inside it, :data:`SIDE_MARGIN`):
+    these roll. Links of radius 0 (lines: the bundled palm and wrap fingers), links with URDF
+    collision shapes (not capsules) and fixed bodies are left out: they keep their glued points."""
     if scene.dim != 3 or not isinstance(scene.object.shape, Sphere):
         return ()
     out = []
     for i in sticking:
         ref = hand.resolve_body(state.contacts[i].body)
-        if ref is None or ref.finger is None or link_shapes(hand, ref, state.q) is not None:
+        if (ref is None or ref.finger is None or link_shapes(hand, ref, state.q) is not None
+                or not hand.body_radius(ref) > 0.0):
             continue
         a, b = hand.body_segment(ref, state.q)
         e = b - a
@@ -112,22 +113,21 @@ class LinkRollCheck:
 
 
 class LinkRollingMotion:
-    """The object motions of ``state`` with its sticking contacts on capsule link sides rolling
-    (:func:`link_rolls`) and the others as :func:`planner.object_motion.motion_manifold` gives them."""
+    """The object motions of ``state`` with the sticking contacts ``rolls`` (:func:`link_rolls`)
+    rolling on capsule link sides and the others given by ``base``, the contact manifold of the
+    other contacts (:func:`planner.object_motion.link_rolling_motion` builds both)."""
 
-    def __init__(self, hand: HandKinematics, scene: Scene, state: GraspState, sticking: Sequence[int],
-                 sliding: Sequence[int] = (), direction: Array | None = None, motion_space: Array | None = None):
+    def __init__(self, hand: HandKinematics, scene: Scene, state: GraspState, rolls: Sequence[int],
+                 base: ContactManifold):
         self.hand, self.scene, self.state = hand, scene, state
-        self.rolls = link_rolls(hand, scene, state, sticking)
+        self.rolls = tuple(rolls)
         self.refs: list[BodyRef] = []
         for i in self.rolls:
             ref = hand.resolve_body(state.contacts[i].body)
             assert ref is not None
             self.refs.append(ref)
         self.radius = float(scene.object.shape.radius) if isinstance(scene.object.shape, Sphere) else 0.0
-        others = [i for i in sticking if i not in self.rolls]
-        self.base: ContactManifold = motion_manifold(scene, hand, state, others, sliding, direction=direction,
-                                                     motion_space=motion_space)
+        self.base = base
         self.M, self.D = hand.M, self.base.D
 
     def pose(self, s: Array) -> Pose:
@@ -204,24 +204,6 @@ class LinkRollingMotion:
                    default=0.0)
         poses = np.array([self.pose(xx[self.M:]).vector() for xx in Xa])
         return LinkRollPath(Xa, poses, self.rolls, worst, slip)
-
-    def rolled_contacts(self, x: Array, sticking: Sequence[int]) -> tuple[GraspContact, ...]:
-        """The contacts at ``x`` ``(M + 6,)``: each rolling link contact at its rolled point
-        ``c = p - r u`` (new point on the link and on the sphere, inward normal ``R^T u``), a sphere
-        rolling on a table at its rolled point
-        (:func:`planner.object_motion.rolled_contacts`), the others as in the state."""
-        q, s = x[: self.M], x[self.M:]
-        plane = [i for i in sticking if i not in self.rolls]
-        out = list(rolled_contacts(self.hand, self.scene, self.state, plane, q, s))
-        pose = self.pose(s)
-        for i, ref in zip(self.rolls, self.refs, strict=True):
-            _, u, _ = link_contact(self.hand, ref, self.radius, q, pose.position)
-            c = pose.position - self.radius * u
-            old = out[i]
-            out[i] = GraspContact(old.body, self.hand.to_local(ref, c, q), pose.to_local(c), pose.R_d.T @ u,
-                                  old.mu, old.origin)
-        return tuple(out)
-
 
 def link_roll_check(hand: HandKinematics, ref: BodyRef, radius: float, X: Array, start: Pose) -> LinkRollCheck:
     """A sphere of ``radius`` rolling on the capsule link ``ref`` along the states ``X`` ``(n, M + 6)``

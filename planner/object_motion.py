@@ -26,9 +26,11 @@ roll (:class:`~planner.manifold.ContactManifold` with ``rolling=True``: the cont
 ``r`` times the disk's turn relative to the link on both surfaces, exactly), those at a sharp link
 tip and on fixed bodies keep their glued points (exact there); for a 3-D sphere
 (:func:`rolls_on_planes`) the sticking contacts on a flat face of a fixed body (a table) roll (the
-sphere turns about a fixed axis ``omega`` while its centre moves by ``r omega x n``, exactly), its
-contacts on links stay glued; :func:`rolled_contacts` gives the contacts where the motion leaves
-them.
+sphere turns about a fixed axis ``omega`` while its centre moves by ``r omega x n``, exactly), and
+those on the side of a capsule link of positive radius roll too (:mod:`planner.link_roll`: rolling
+on a moving link is non-holonomic, so the motion is integrated on its velocity rows and its path
+checked as it is, not planned by OMPL); its contacts on links of radius 0 and at link tips stay
+glued; :func:`rolled_contacts` gives the contacts where the motion leaves them.
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ from analysis.scene import Cylinder, Disk, Scene, Sphere
 from planner.budget import CheckBudget
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel
 from planner.ik import joint_limits
+from planner.link_roll import LINK_ROLL_SLIP_TOL, LinkRollingMotion, link_contact, link_roll_check, link_rolls
 from planner.manifold import ContactManifold, pose_displacement, project_manifold
 from planner.state import GraspContact, GraspState
 
@@ -74,9 +77,10 @@ class ObjectMotion:
 
 
 def rolls_on_links(scene: Scene) -> bool:
-    """Do the sticking contacts on a link's side roll in object motions? For a 2-D disk object
-    (:class:`~planner.manifold.ContactManifold` ``rolling=True``); a 3-D sphere rolls on the flat
-    faces of fixed bodies only (:func:`rolls_on_planes`), its contacts on links stay glued."""
+    """Do the sticking contacts on a link's side roll in object motions on the contact manifold? For
+    a 2-D disk object (:class:`~planner.manifold.ContactManifold` ``rolling=True``); a 3-D sphere
+    rolls there on the flat faces of fixed bodies (:func:`rolls_on_planes`), and on capsule link
+    sides by its velocity rows (:func:`planner.link_roll.link_rolls`, not a manifold)."""
     return scene.dim == 2 and isinstance(scene.object.shape, Disk)
 
 
@@ -106,11 +110,15 @@ def rolled_contacts(hand: HandKinematics, scene: Scene, state: GraspState, stick
                     s: Array, contacts: Sequence[GraspContact] | None = None) -> tuple[GraspContact, ...]:
     """The contacts after an object motion from ``state`` that ends with the hand at ``q`` ``(M,)``
     and the object at displacement ``s`` ``(D,)``: every rolling contact (a sticking contact on a
-    link's side of a 2-D disk, :func:`motion_manifold`) at its rolled point (new point on the link,
-    new point and inward normal on the disk, :meth:`ContactManifold.rolling_contact`), the others as
-    in ``contacts`` (default: ``state.contacts``)."""
+    link's side of a 2-D disk, :func:`motion_manifold`; of a 3-D sphere on a table or a capsule
+    link's side, :func:`_link_rolled`) at its rolled point (new point on the body, new point and
+    inward normal on the object, :meth:`ContactManifold.rolling_contact`), the others as in
+    ``contacts`` (default: ``state.contacts``)."""
     out = list(state.contacts if contacts is None else contacts)
-    if not (rolls_on_links(scene) or rolls_on_planes(scene)) or not sticking:
+    if not sticking:
+        return tuple(out)
+    _link_rolled(hand, scene, state, sticking, q, s, out)
+    if not (rolls_on_links(scene) or rolls_on_planes(scene)):
         return tuple(out)
     man = motion_manifold(scene, hand, state, sticking)
     x = np.concatenate([np.asarray(q, dtype=float), np.asarray(s, dtype=float)])  # (M + D,)
@@ -125,6 +133,26 @@ def rolled_contacts(hand: HandKinematics, scene: Scene, state: GraspState, stick
         c = out[i]
         out[i] = GraspContact(c.body, hand.to_local(ref, y, q), p_obj, n_obj, c.mu, c.origin)
     return tuple(out)
+
+
+def _link_rolled(hand: HandKinematics, scene: Scene, state: GraspState, sticking: Sequence[int], q: Array,
+                 s: Array, out: list[GraspContact]) -> None:
+    """Set in ``out`` each contact of a 3-D sphere rolling on a capsule link's side
+    (:func:`planner.link_roll.link_rolls`) at its rolled point ``c = p - r u`` (new point on the
+    link and on the sphere, inward normal ``R^T u``; ``u`` the unit normal from the link's axis to
+    the centre ``p``) with the hand at ``q`` and the object at displacement ``s``."""
+    rolls = link_rolls(hand, scene, state, sticking)
+    if not rolls:
+        return
+    r = float(scene.object.shape.radius)  # type: ignore[union-attr]  # a sphere (link_rolls)
+    pose = state.pose.displaced(np.asarray(s, dtype=float))
+    for i in rolls:
+        ref = hand.resolve_body(state.contacts[i].body)
+        assert ref is not None
+        _, u, _ = link_contact(hand, ref, r, np.asarray(q, dtype=float), pose.position)
+        c_w = pose.position - r * u
+        c = out[i]
+        out[i] = GraspContact(c.body, hand.to_local(ref, c_w, q), pose.to_local(c_w), pose.R_d.T @ u, c.mu, c.origin)
 
 
 def project_contacts(
@@ -256,6 +284,10 @@ def integrate_object_motion(
     hand = model.hand
     dr = np.asarray(dr, dtype=float)
     dr = dr / np.linalg.norm(dr)
+    rolling = _link_rolling(model.scene, hand, state, sticking, sliding, dr, motion_space)
+    if rolling is not None:  # a sphere rolling on a link's side: integrated on its velocity rows
+        return _integrate_link_rolling(model, state, rolling, dr, dq, separating, distance, steps, check_path,
+                                       (*sticking, *separating, *sliding), motion_space)
     man = motion_manifold(model.scene, hand, state, sticking, sliding, direction=dr, motion_space=motion_space)
     x = np.concatenate([state.q, np.zeros(len(dr))])
     h = distance / steps
@@ -287,19 +319,81 @@ def integrate_object_motion(
             continue
         if not valid(q, cur.pose):
             return None
+    seps_a = _separations(model, state, separating, q, cur.pose)
+    if len(seps_a) and np.any(seps_a <= 0.0):
+        return None
+    length = float(np.sum(np.linalg.norm(np.diff(np.array(poses), axis=0), axis=1)))
+    return ObjectMotion(np.array(qs), np.array(poses), seps_a, length, worst_res, dr,
+                        None if motion_space is None else np.asarray(motion_space, dtype=float))
+
+
+def _separations(model: CollisionModel, state: GraspState, separating: Sequence[int], q: Array, pose: Pose) -> Array:
+    """The gap ``(#D,)`` of each separating contact's body point from the object at ``pose``, hand at ``q``."""
+    hand = model.hand
     seps = []
     for i in separating:
         c = state.contacts[i]
         ref = hand.resolve_body(c.body)
         assert ref is not None
         x = hand.point_position(ref, c.point_body, q)
-        sd = shape_signed_distance(model.scene.object.shape, cur.pose.to_local(x), cur.dim)
+        sd = shape_signed_distance(model.scene.object.shape, pose.to_local(x), state.dim)
         seps.append(np.inf if sd is None else sd)
-    seps_a = np.array(seps, dtype=float)
-    if len(seps_a) and np.any(seps_a <= 0.0):
+    return np.array(seps, dtype=float)
+
+
+def link_rolling_motion(scene: Scene, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
+                        sliding: Sequence[int] = (), direction: Array | None = None,
+                        motion_space: Array | None = None) -> LinkRollingMotion | None:
+    """The object motions of ``state`` whose sticking contacts of a 3-D sphere on capsule link sides
+    roll (:func:`planner.link_roll.link_rolls`; the other contacts on :func:`motion_manifold`), or
+    None without such contacts."""
+    rolls = link_rolls(hand, scene, state, sticking)
+    if not rolls:
         return None
-    length = float(np.sum(np.linalg.norm(np.diff(np.array(poses), axis=0), axis=1)))
-    return ObjectMotion(np.array(qs), np.array(poses), seps_a, length, worst_res, dr,
+    base = motion_manifold(scene, hand, state, [i for i in sticking if i not in rolls], sliding, direction=direction,
+                           motion_space=motion_space)
+    return LinkRollingMotion(hand, scene, state, rolls, base)
+
+
+def _link_rolling(scene: Scene, hand: HandKinematics, state: GraspState, sticking: Sequence[int],
+                  sliding: Sequence[int], direction: Array | None,
+                  motion_space: Array | None) -> LinkRollingMotion | None:
+    """:func:`link_rolling_motion` of an object motion with a direction (else None)."""
+    return None if direction is None else link_rolling_motion(scene, hand, state, sticking, sliding, direction,
+                                                              motion_space)
+
+
+#: the most midpoint steps :func:`_integrate_link_rolling` takes for one object motion
+MAX_ROLL_STEPS = 4000
+
+
+def _integrate_link_rolling(model: CollisionModel, state: GraspState, rolling: LinkRollingMotion, dr: Array, dq: Array,
+                            separating: Sequence[int], distance: float, steps: int, check_path: bool,
+                            busy: Sequence[int], motion_space: Array | None) -> ObjectMotion | None:
+    """:func:`integrate_object_motion` of a sphere rolling on a link's side
+    (:meth:`planner.link_roll.LinkRollingMotion.integrate`: velocity rows, midpoint steps), in
+    steps small enough that no joint moves more than :data:`DENSE_STEP` between two states (the
+    path is then checked as it is, :func:`plan_object_motion`); None where the holonomic rows leave
+    ``1e-6``, it slips more than :data:`ROLL_SLIP_TOL`, it collides or a D-contact does not separate."""
+    n = steps
+    while True:
+        path = rolling.integrate(dr, distance, dq, steps=n)
+        jump = float(np.max(np.abs(np.diff(path.X[:, : model.hand.M], axis=0))))
+        if jump <= DENSE_STEP or n >= MAX_ROLL_STEPS:
+            break
+        n = min(MAX_ROLL_STEPS, int(np.ceil(n * jump / DENSE_STEP * 1.05)))
+    if jump > DENSE_STEP or path.max_residual > 1e-6 or path.slip > min(ROLL_SLIP_TOL, LINK_ROLL_SLIP_TOL):
+        return None
+    M = model.hand.M
+    poses = [rolling.pose(x[M:]) for x in path.X]
+    valid = _MotionCheck.of(model, state, busy)
+    if (check_path and not valid.all_valid(path.X[:, :M], poses)) or not valid(path.X[-1, :M], poses[-1]):
+        return None
+    seps = _separations(model, state, separating, path.X[-1, :M], poses[-1])
+    if len(seps) and np.any(seps <= 0.0):
+        return None
+    length = float(np.sum(np.linalg.norm(np.diff(path.poses, axis=0), axis=1)))
+    return ObjectMotion(path.X[:, :M], path.poses, seps, length, path.max_residual, dr,
                         None if motion_space is None else np.asarray(motion_space, dtype=float))
 
 
@@ -406,6 +500,9 @@ def plan_object_motion(
     direction = goal.direction
     if direction is None and float(np.linalg.norm(s1)) > 1e-12:
         direction = s1 / np.linalg.norm(s1)
+    rolling = _link_rolling(model.scene, hand, state, sticking, sliding, direction, goal.motion_space)
+    if rolling is not None:
+        return _checked_link_rolling(model, state, goal, rolling, (*sticking, *separating, *sliding), tolerance)
     man = motion_manifold(model.scene, hand, state, sticking, sliding, direction=direction,
                           motion_space=goal.motion_space)
     M, D = man.M, man.D
@@ -539,6 +636,35 @@ def plan_object_motion(
                       for q, v in zip(goal.q_path, goal.pose_path, strict=True)])
         out = checked(X, 0)
     return out
+
+
+def _checked_link_rolling(model: CollisionModel, state: GraspState, goal: ObjectMotion, rolling: LinkRollingMotion,
+                          busy: Sequence[int], tolerance: float) -> ConstrainedObjectMotion | None:
+    """:func:`plan_object_motion` of a sphere rolling on a link's side: rolling on a moving link is
+    non-holonomic, so no manifold ``F(x) = 0`` of OMPL's constrained planning holds it; the path is
+    the integrated one (:func:`_integrate_link_rolling`, ``ompl_planner_states = 0``), every state of
+    it checked again: the holonomic rows (the other contacts, the gaps, the direction rows) within
+    ``100 * tolerance``, joints within :data:`DENSE_STEP` between states, joint limits and
+    collisions, every object segment within :data:`MIN_DIRECTION_COSINE` of the direction, the
+    slip of every rolling contact (link: :func:`planner.link_roll.link_roll_check`; table:
+    :func:`rolling_slip`) at most :data:`ROLL_SLIP_TOL`. None if any fails."""
+    t0 = time.perf_counter()
+    S = np.array([pose_displacement(state, v) for v in goal.pose_path])  # (n, D)
+    X = np.hstack([goal.q_path, S])  # (n, M + D)
+    residual = max(float(np.linalg.norm(rolling.holonomic(x))) for x in X)
+    step = float(np.max(np.abs(np.diff(goal.q_path, axis=0)))) if len(X) > 1 else 0.0
+    poses = [rolling.pose(s) for s in S]
+    if residual > 100 * tolerance or step > DENSE_STEP or not _MotionCheck.of(model, state, busy).all_valid(
+            goal.q_path, poses):
+        return None
+    assert goal.direction is not None
+    if direction_cosines(S, goal.direction).min() < MIN_DIRECTION_COSINE:
+        return None
+    slips = [link_roll_check(model.hand, ref, rolling.radius, X, state.pose).slip for ref in rolling.refs]
+    if max(slips) > ROLL_SLIP_TOL or rolling_slip(rolling.base, S) > ROLL_SLIP_TOL:
+        return None
+    return ConstrainedObjectMotion(goal.q_path, goal.pose_path, S, goal.separations, goal.length, residual, step,
+                                   len(X), 0, time.perf_counter() - t0)
 
 
 #: scene units: the largest slip (:func:`rolling_slip`) of a sphere rolling on a plane along a

@@ -22,7 +22,10 @@ contact point lies on its body and on the object) and:
   contact on a fixed body's face rolls: at every waypoint the sphere touches the plane, between
   waypoints its contact point does not slip, the contact point travels on the plane and on the
   sphere ``r`` times the rolling turn, and the state after the step has the rolled contact
-  (:func:`_plane_rolling_problems`); and densely
+  (:func:`_plane_rolling_problems`); for a 3-D sphere every sticking contact on a capsule link's
+  side rolls: at every waypoint the gap is zero, between waypoints the sphere does not slip
+  against the link, the contact point travels as far on the link as on the sphere, and the state
+  after the step has the rolled contact (:func:`_link_rolling_problems`); and densely
   (waypoints at most ``DENSE_STEP`` apart), at every waypoint, the object penetrates no fixed
   body and no link penetrates the object, a fixed body or another link;
 * ``slide`` (33 with one S-point, the object still): densely, the sliding contact's gap and face,
@@ -52,11 +55,13 @@ from analysis.scene import Box, Cylinder, Disk, Scene, Sphere
 from analysis.torques import torque_set
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel, path_clearance_certified
 from planner.link_release import OVERLAP_SLACK, ROUNDING
+from planner.link_roll import link_contact, link_roll_check, link_rolls
 from planner.manifold import pose_displacement
 from planner.motion_length import line_contacts, torque_margin, waypoint_state
 from planner.object_motion import (
     MIN_DIRECTION_COSINE,
     direction_cosines,
+    link_rolling_motion,
     motion_manifold,
     rolls_on_links,
     rolls_on_planes,
@@ -133,6 +138,7 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
         problems.extend(_manifold_problems(scene, hand, step, tag))
         problems.extend(_rolling_problems(scene, hand, step, tag))
         problems.extend(_plane_rolling_problems(scene, hand, step, tag))
+        problems.extend(_link_rolling_problems(scene, hand, step, tag))
         p = before.parts(t.combination)
         oracle = p.oracle()
         assert t.torque_set is not None
@@ -332,17 +338,21 @@ def _penetration_problems(scene: Scene, hand: HandKinematics, step: PlanStep, ta
 
 def _manifold_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
     """Every waypoint of an object motion lies on the contact manifold of its kept contacts (body
-    point = object point; for a 2-D disk, rolling on a link's side: :func:`motion_manifold`) and of
+    point = object point; for a 2-D disk, rolling on a link's side: :func:`motion_manifold`; for a
+    3-D sphere on a capsule link's side, its gap: :meth:`LinkRollingMotion.holonomic`) and of
     its sliding ones (touching), eq. (7) to every order, within 1e-6.
     The sliding contacts are the step's ``sliding_contacts``, as the planner followed them."""
     t = step.transition
     sliding = [int(i) for i in getattr(t.figures, "sliding_contacts", ())]
     sticking = [i for i, ch in enumerate(t.combination) if ch != "D" and i not in sliding]
     try:
-        man = motion_manifold(scene, hand, step.before, sticking, sliding)
+        rolling = link_rolling_motion(scene, hand, step.before, sticking, sliding)
+        # a sphere rolling on a link's side: its gap, not a glued point
+        F = motion_manifold(scene, hand, step.before, sticking, sliding).function if rolling is None else \
+            rolling.holonomic
     except CTPError as e:
         return [f"{tag}: {e}"]
-    worst = max(float(np.linalg.norm(man.function(np.concatenate([q, pose_displacement(step.before, pose)]))))
+    worst = max(float(np.linalg.norm(F(np.concatenate([q, pose_displacement(step.before, pose)]))))
                 for q, pose in zip(t.q_path, t.object_path, strict=True))
     return [] if worst <= 1e-6 else [f"{tag}: path leaves the contact manifold (residual {worst:.2g})"]
 
@@ -534,6 +544,51 @@ def _plane_rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, 
         if err > ROLL_TOL:
             out.append(f"{tag}: the state after the step does not have contact {i} ({c.body}) where it rolled "
                        f"(off by {err:.3g})")
+    return out
+
+
+def _link_rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
+    """The rolling kinematics of an object motion of a 3-D sphere (radius ``r``) on the side of a
+    capsule link (:func:`planner.link_roll.link_rolls`), from the waypoints alone
+    (:func:`planner.link_roll.link_roll_check`): the gap ``|p - y| - rho - r`` zero at every
+    waypoint; the slip, in the link's frame, ``|dc + omega_rel x (-r u_mid)|`` summed over the
+    segments, zero; the contact point's travel on the link (link frame) equal to its travel on the
+    sphere (object frame); the state after the step has the contact at the rolled point
+    ``p - r u`` (on the link and on the sphere) with the normal ``u``. All within :data:`ROLL_TOL`."""
+    t = step.transition
+    sliding = {int(i) for i in getattr(t.figures, "sliding_contacts", ())}
+    sticking = [i for i, ch in enumerate(t.combination) if ch != "D" and i not in sliding]
+    rolls = link_rolls(hand, scene, step.before, sticking)
+    if not rolls:
+        return []
+    r = float(scene.object.shape.radius)  # type: ignore[union-attr]  # a sphere (link_rolls)
+    X = np.array([np.concatenate([q, pose_displacement(step.before, pose)])
+                  for q, pose in zip(t.q_path, t.object_path, strict=True)])  # (n, M + 6)
+    after = step.after
+    out: list[str] = []
+    for i in rolls:
+        c = step.before.contacts[i]
+        ref = hand.resolve_body(c.body)
+        assert ref is not None
+        chk = link_roll_check(hand, ref, r, X, step.before.pose)
+        if chk.max_gap > ROLL_TOL:
+            out.append(f"{tag}: rolling contact {i} ({c.body}) leaves the link's surface (gap {chk.max_gap:.3g})")
+        if chk.slip > ROLL_TOL:
+            out.append(f"{tag}: rolling contact {i} ({c.body}) slips by {chk.slip:.3g} on the link over the path")
+        if abs(chk.travel_link - chk.travel_object) > ROLL_TOL:
+            out.append(f"{tag}: rolling contact {i} ({c.body}): the contact point travels {chk.travel_link:.6g} on "
+                       f"the link and {chk.travel_object:.6g} on the sphere")
+        _, u, _ = link_contact(hand, ref, r, after.q, after.position)
+        y = after.position - r * u  # (3,) the rolled contact
+        errs = [max(float(np.linalg.norm(hand.point_position(ref, after.contacts[j].point_body, after.q) - y)),
+                    float(np.linalg.norm(after.world_point(j) - y)),
+                    r * float(np.linalg.norm(after.world_normal(j) - u)))
+                for j, name in enumerate(after.bodies()) if name == c.body]
+        if not errs:
+            out.append(f"{tag}: rolling contact {i} ({c.body}) is missing after the step")
+        elif min(errs) > ROLL_TOL:
+            out.append(f"{tag}: the state after the step does not have contact {i} ({c.body}) where it rolled "
+                       f"(off by {min(errs):.3g})")
     return out
 
 

@@ -19,10 +19,14 @@ from scipy.spatial.transform import Rotation
 from analysis.kinematics import HandKinematics
 from analysis.loader import load_scene
 from analysis.scene import Finger3D, Scene
+from planner import Goal, plan
 from planner.link_roll import LINK_ROLL_SLIP_TOL, LinkRollingMotion, link_roll_check, link_rolls
-from planner.manifold import project_manifold
-from planner.object_motion import motion_manifold, rolling_slip
+from planner.manifold import pose_displacement, project_manifold
+from planner.object_motion import link_rolling_motion, motion_manifold, rolled_contacts, rolling_slip
+from planner.options import PlannerOptions
+from planner.plan import Plan
 from planner.state import GraspState, state_from_scene
+from planner.verify import verify_plan
 
 SCENE = EXAMPLES / "sphere_link_roll.json"
 R, RHO = 0.5, 0.05  # the sphere's radius and the link's in SCENE
@@ -74,6 +78,13 @@ def _coal_gap(scene: Scene, q: np.ndarray, centre: np.ndarray) -> float:
     return float(d)
 
 
+def _rolling(scene: Scene, hand: HandKinematics, st: GraspState, sticking: list[int],
+             direction: np.ndarray | None = None) -> LinkRollingMotion:
+    lm = link_rolling_motion(scene, hand, st, sticking, direction=direction)
+    assert lm is not None
+    return lm
+
+
 def _glued_path(scene: Scene, hand: HandKinematics, st: GraspState, steps: int = 100) -> np.ndarray:
     """Today's manifold (the link point glued, the table rolling) along DR, progress held per step."""
     man = motion_manifold(scene, hand, st, [LINK, TABLE], direction=DR)
@@ -90,7 +101,7 @@ def _glued_path(scene: Scene, hand: HandKinematics, st: GraspState, steps: int =
 
 def test_the_link_contact_rolls_and_the_table_rolls(scene: Scene, setup: tuple[HandKinematics, GraspState]) -> None:
     hand, st = setup
-    lm = LinkRollingMotion(hand, scene, st, [LINK, TABLE], direction=DR)
+    lm = _rolling(scene, hand, st, [LINK, TABLE], DR)
     assert lm.rolls == (LINK,) and [k[0] for k in lm.base.plane_rolls] == [TABLE] and not lm.base.items
     assert link_rolls(hand, load_scene(EXAMPLES / "sphere_table_roll.json"), state_from_scene(
         load_scene(EXAMPLES / "sphere_table_roll.json")), [0, 1]) == ()  # a sharp tip: glued
@@ -101,7 +112,7 @@ def test_no_slip_rows_are_the_material_points_velocities(scene: Scene,
     """``no_slip(x) x'`` is the velocity of the sphere's material point at the contact minus the
     link's there, by central differences of the two points' positions, at random ``x``, ``x'``."""
     hand, st = setup
-    lm = LinkRollingMotion(hand, scene, st, [LINK, TABLE])
+    lm = _rolling(scene, hand, st, [LINK, TABLE])
     ref = lm.refs[0]
     rng = np.random.default_rng(3)
     eps = 1e-6
@@ -149,7 +160,7 @@ def test_the_rolling_path_keeps_the_gap_and_does_not_slip(scene: Scene,
     the sphere's turn against the link on both surfaces (equal travels), where the link's
     independent forward kinematics says it lies."""
     hand, st = setup
-    lm = LinkRollingMotion(hand, scene, st, [LINK, TABLE], direction=DR)
+    lm = _rolling(scene, hand, st, [LINK, TABLE], DR)
     path = lm.integrate(DR, DISTANCE, steps=200)
     assert path.max_residual < 1e-10
     for x in path.X[::10]:
@@ -164,7 +175,7 @@ def test_the_rolling_path_keeps_the_gap_and_does_not_slip(scene: Scene,
     coarse = lm.integrate(DR, DISTANCE, steps=100)
     assert 3.5 < coarse.slip / path.slip < 4.5
     # the rolled contact: on the link's surface (independent FK) and on the sphere
-    out = lm.rolled_contacts(path.X[-1], [LINK, TABLE])
+    out = rolled_contacts(hand, scene, st, [LINK, TABLE], path.X[-1, :3], path.X[-1, 3:])
     q, pose = path.X[-1, :3], st.pose.displaced(path.X[-1, 3:])
     a, b, Rl = _link_axis(scene, q, 2)
     c_world = a + Rl @ out[LINK].point_body
@@ -188,7 +199,7 @@ def test_on_a_still_link_it_is_the_plane_formula(scene: Scene, setup: tuple[Hand
     u = (st.pose.position - st.world_point(LINK)) / R
     twist = np.concatenate([e, np.cross(u, e) / R])
     dr = twist / np.linalg.norm(twist)
-    lm = LinkRollingMotion(hand, scene, st, [LINK], direction=dr)
+    lm = _rolling(scene, hand, st, [LINK], dr)
     dist = 0.08 * float(np.linalg.norm(twist))  # 8 cm along the axis
     path = lm.integrate(dr, dist, steps=40)
     np.testing.assert_allclose(path.X[:, :3], np.tile(st.q, (len(path.X), 1)), atol=1e-12)
@@ -200,3 +211,63 @@ def test_on_a_still_link_it_is_the_plane_formula(scene: Scene, setup: tuple[Hand
     assert chk.travel_link == pytest.approx(0.08, rel=1e-9)
     # on the sphere a great circle's arc r |w|, summed as its 40 chords
     assert chk.travel_object == pytest.approx(40 * 2 * R * np.sin(np.linalg.norm(s[3:]) / 80), rel=1e-9)
+
+
+GOAL = Goal(type="displacement", displacement=[0.05, 0.0, 0.0, 0.0, 0.0, 0.0], position_tolerance=0.005,
+            rotation_tolerance="free")
+#: effort_weight 0: with the default 0.1 the search prefers regrasping with the finger's tip (its
+#: torques are smaller) to rolling on the link's side
+OPTIONS = PlannerOptions(sliding_motions=False, effort_weight=0.0)
+
+
+@pytest.fixture(scope="module")
+def roll_plan(scene: Scene) -> Plan:
+    p = plan(scene, GOAL, options=OPTIONS)
+    assert p.found, p.reason
+    return p
+
+
+def test_the_plan_rolls_on_the_link_and_verifies(scene: Scene, roll_plan: Plan) -> None:
+    """Every step an FF object motion rolling on the link (the integrated path, ``ompl_planner_states
+    = 0``: rolling on a moving link is non-holonomic, no manifold of OMPL holds it), passing
+    verify_plan (gap, slip, both travels, the rolled contact); recomputed here: coal gap below 1e-9
+    at every waypoint, slip below 1e-6 per step, and the contact moved along the link by the summed
+    travel."""
+    assert verify_plan(scene, roll_plan) == []
+    hand = HandKinematics.from_scene(scene)
+    ref = hand.resolve_body("f/2")
+    assert ref is not None
+    travel = 0.0
+    for step in roll_plan.steps:
+        t = step.transition
+        assert t.kind == "object_motion" and t.combination == "FF" and t.figures.ompl_planner_states == 0
+        X = np.array([np.concatenate([q, pose_displacement(step.before, v)])
+                      for q, v in zip(t.q_path, t.object_path, strict=True)])
+        for x in X:
+            assert abs(_coal_gap(scene, x[:3], step.before.pose.displaced(x[3:]).position)) < 1e-9
+        chk = link_roll_check(hand, ref, R, X, step.before.pose)
+        assert chk.slip < 1e-6
+        travel += chk.travel_link
+    first, last = roll_plan.steps[0].before, roll_plan.steps[-1].after
+    moved = float(np.linalg.norm(last.contacts[last.bodies().index("f/2")].point_body
+                                 - first.contacts[first.bodies().index("f/2")].point_body))
+    assert moved > 0.015 and moved == pytest.approx(travel, rel=1e-3)  # along the link's straight side
+    assert np.linalg.norm(last.position - first.position) > 0.045
+
+
+@pytest.mark.slow
+def test_a_glued_link_plan_fails_verification(scene: Scene, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The planner with the link contact glued (link_rolls patched to none while it plans):
+    verify_plan, which follows the rolling, finds its object motions pressing the sphere into
+    the link (gap) and off the rolling contact."""
+    import planner.object_motion as om
+
+    monkeypatch.setattr(om, "link_rolls", lambda *a, **k: ())
+    p = plan(scene, GOAL, options=OPTIONS)
+    monkeypatch.undo()
+    assert p.found
+    motions = [s for s in p.steps if s.transition.kind == "object_motion"
+               and "f/2" in s.before.bodies() and s.transition.combination == "FF"]
+    assert motions
+    problems = verify_plan(scene, p)
+    assert any("leaves the link's surface" in m or "leaves the contact manifold" in m for m in problems), problems
