@@ -139,3 +139,33 @@ def test_a_contact_goal_is_reached_by_release_and_re_placement(baxter: Scene) ->
     assert [s.kind for s in rep.steps] == ["release", "contact"]
     assert rep.steps[-1].joint_error <= 0.01
     assert not plan(baxter, goal, max_expansions=4).found
+
+
+@pytest.mark.slow
+def test_a_point_off_the_forearm_s_line_is_reached_through_the_elbow_s_slide(baxter: Scene) -> None:
+    """With slides as well, a point 2.2 cm off the forearm's line (on the +y face) is reached by a
+    whole-arm regrasp: the forearm lifted off, the elbow slid up the face, the forearm laid on a new
+    line through the point; the plan verifies and replays in MuJoCo, the box still. The point is
+    where the forearm lies after the elbow's slide up (+z) found without the goal."""
+    from sim.plan_replay import simulate_plan
+
+    start_point, u = _goal_point(baxter)
+    point = np.array([0.60596, 0.2, 1.01061])
+    n = np.array([0.0, 1.0, 0.0])
+    start_contact = start_point - ALONG * u - ACROSS * np.cross(n, u)
+    off_line = float(np.cross(n, u) @ (point - start_contact))
+    assert abs(off_line) > 0.02  # m: not on the forearm's line at the start (the re-placement alone cannot)
+    goal = Goal(type="contact", body=FOREARM, point=point.tolist())
+    p = plan(baxter, goal, options=PlannerOptions(link_replacement=True, contact_slides=True), max_expansions=30)
+    assert p.found, p.reason
+    assert [s.transition.kind for s in p.steps] == ["release", "slide", "contact"]
+    assert p.steps[1].transition.figures.body == "left/left_lower_elbow"  # type: ignore[union-attr]
+    last = p.steps[-1].after
+    i = next(i for i, c in enumerate(last.contacts) if c.body == FOREARM)
+    assert float(np.linalg.norm(last.world_point(i) - point)) <= goal.position_tol(object_size(baxter))
+    assert verify_plan(baxter, p) == []
+    rep = simulate_plan(baxter, p)
+    js = rep.to_json()
+    assert rep.ok and not rep.dropped, js
+    assert js["position_error"] <= 1e-4, js
+    assert rep.steps[1].slide_error is not None and rep.steps[1].slide_error <= 0.05
