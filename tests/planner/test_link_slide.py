@@ -313,3 +313,22 @@ def test_the_graph_s_slides_are_lazy_and_validate_to_the_eager_ones(baxter: Scen
         assert cost == pytest.approx(te.cost, rel=0, abs=1e-12)
         np.testing.assert_array_equal(t.q_path, te.q_path)
         assert g.states[s.node].key() == new.key()
+
+
+@pytest.mark.slow
+def test_the_state_after_a_planned_slide_is_where_its_path_ends(baxter: Scene) -> None:
+    """Towards the elbow goal of docs/theory.md (a point rounded to 0.1 mm), the slide towards the
+    point and the slide along +z end 40 um apart in one node; the plan's state after its slide must
+    be the one its joint path ends at (the eager edges kept the first slide's state and the cheaper
+    slide's path: the elbow's contact 40 um from where the path put it)."""
+    goal = Goal(type="contact", body="left/left_lower_elbow", point=[0.5236, 0.2, 1.1104])
+    p = plan(baxter, goal, options=PlannerOptions(contact_slides=True), max_expansions=5)
+    assert p.found, p.reason
+    assert [s.transition.kind for s in p.steps] == ["release", "slide"]
+    hand = HandKinematics.from_scene(baxter)
+    step = p.steps[-1]
+    c = step.before.contacts[0]
+    assert c.body == "left/left_lower_elbow"
+    x_end = hand.point_position(hand.resolve_body(c.body), c.point_body, step.transition.q_path[-1])  # type: ignore[arg-type]
+    assert float(np.linalg.norm(x_end - step.after.world_point(0))) <= 1e-9
+    assert verify_plan(baxter, p) == []
