@@ -5,7 +5,8 @@ a face of a box object: Baxter's forearm, lifted off the box while its elbow sta
 back to the side of the box. :mod:`planner.contact_edges` makes new contacts with fingertips
 only; this module makes them with any link that touched the object in the scene and touches
 nothing now (:func:`replace_links`), at the face points of :func:`face_targets` (a 3 x 3 grid on
-each face, away from the other contacts and the face's edges).
+each face, away from the other contacts and the face's edges) and, towards a ``contact`` goal for
+the link, at the goal's point (:func:`goal_target`).
 
 **The pinned placement** (:func:`place_link_pinned`). Only the moving finger's joints ``q_f``
 change; every other finger keeps its joints (the holding chains are pinned), the object stays
@@ -256,6 +257,29 @@ def face_targets(nodes: GraphNodes, state: GraspState, finger: int) -> list[Face
     return out
 
 
+def goal_target(nodes: GraphNodes, state: GraspState, link: BodyRef) -> FaceTarget | None:
+    """Towards a ``contact`` goal for ``link`` (:func:`planner.goals.contact_reached`), the goal's
+    point as a face target: projected on the plane of the box face nearest it (world, the face's
+    outward normal), where it lies within the goal's position tolerance of that plane; else None.
+    The placement lays the link over it, or, where its kept contacts leave it one line on the face
+    (``over_point=False``), makes the contact at the point of its side nearest it."""
+    goal = nodes.goal
+    shape = nodes.scene.object.shape
+    if goal.type != "contact" or goal.body != link.name or goal.point is None or not isinstance(shape, Box):
+        return None
+    R = state.rotation[:3, :3]
+    h = np.asarray(shape.size, float) / 2
+    c = np.asarray(shape.position if shape.position is not None else np.zeros(3), float)
+    p_obj = R.T @ (np.asarray(goal.point, dtype=float) - state.position) - c  # (3,) from the box's centre
+    ax = int(np.argmax(np.abs(p_obj) / h))  # the face whose plane is nearest, in half-sizes
+    n_obj = np.zeros(3)
+    n_obj[ax] = np.sign(p_obj[ax]) if p_obj[ax] != 0.0 else 1.0
+    if abs(abs(float(p_obj[ax])) - h[ax]) > goal.position_tol(nodes.size):
+        return None
+    p_obj[ax] = n_obj[ax] * h[ax]
+    return FaceTarget(state.position + R @ (p_obj + c), R @ n_obj)
+
+
 def _inside_face(nodes: GraphNodes, p_obj: Array) -> bool:
     """Whether the object-frame point ``p_obj`` ``(3,)`` of a box's surface lies inside one face by
     :data:`EDGE_MARGIN` of its half-sizes (the face normal is then the only normal there)."""
@@ -283,7 +307,8 @@ def replace_links(nodes: GraphNodes, state: GraspState, finger: int) -> list[Bod
 
 def replace_edges(nodes: GraphNodes, state: GraspState) -> list[Successor]:
     """Eq. (33), D -> F with any link (module docstring): for every finger with a link of
-    :func:`replace_links`, every face target the link can be laid on by the pinned placement, the
+    :func:`replace_links`, every face target the link can be laid on by the pinned placement (the
+    goal's point first, :func:`goal_target`; a configuration reached from several targets once), the
     placement collision-free (the finger's contacts and the new link touching). Lazy: the
     transfer is planned by :func:`validate_replace` when the search needs the edge."""
     hand, model, options = nodes.hand, nodes.model, nodes.options
@@ -299,12 +324,15 @@ def replace_edges(nodes: GraphNodes, state: GraspState) -> list[Successor]:
         links = replace_links(nodes, state, f)
         if not links:
             continue
-        targets = face_targets(nodes, state, f)
         kept_refs = [k.ref for k in kept_contacts(nodes, state, f)]
         allow = transfer_allowance(nodes, state, f)
         sl = hand.finger_slice(f)
         placed: list[Array] = []
         for ref in links:
+            towards = goal_target(nodes, state, ref)
+            targets = face_targets(nodes, state, f)
+            if towards is not None:  # first: the grid's placements of the same configuration are dropped
+                targets.insert(0, towards)
             for target in targets:
                 with nodes.timings.measure("ik"):
                     pl = place_link_pinned(nodes, state, f, ref, target)

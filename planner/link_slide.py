@@ -41,6 +41,8 @@ Off by default (:attr:`planner.options.PlannerOptions.contact_slides`).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from analysis._types import Array
@@ -50,8 +52,9 @@ from analysis.regrasp import sliding_equilibrium
 from analysis.scene import Box, Scene
 from planner.collision import DENSE_STEP, path_clearance_certified
 from planner.ik import joint_limits
-from planner.link_replace import _equations, _inside_face, kept_contacts, transfer_allowance
+from planner.link_replace import _equations, _inside_face, _Kept, kept_contacts, transfer_allowance
 from planner.nodes import GraphNodes
+from planner.search import Successor
 from planner.state import GraspContact, GraspState, StateAnalysis, all_f
 from planner.transition import SlideFigures, Transition
 
@@ -64,6 +67,8 @@ ADVANCE = 0.01
 #: radius); an end may lie at most this much (object sizes) below the radius at the start (Baxter's
 #: elbow after its forearm's release is tilted 0.9 degrees, one end 1.4 mm lower, over the box's edge)
 TILT = 0.01
+#: least-squares residual (of a unit advance) above which a slide has no first-order motion
+FIRST_ORDER_TOL = 1e-6
 
 
 def sliding_combination(state: GraspState, i: int) -> str:
@@ -156,6 +161,8 @@ def slide_path(nodes: GraphNodes, state: GraspState, i: int, u: Array, length: f
             q[sl] = np.clip(q[sl] + np.linalg.lstsq(np.vstack(rows), -err, rcond=1e-10)[0], lo, hi)
         return q, res
 
+    if not first_order_slide(hand, ref, c.point_body, state.q, x0, n, u, heights, kept, sl):
+        return None  # no motion of the finger advances the contact along u at first order
     path = [np.array(state.q, dtype=float)]
     s, h = 0.0, ADVANCE * nodes.size
     while s < length - 1e-12:
@@ -171,6 +178,24 @@ def slide_path(nodes: GraphNodes, state: GraspState, i: int, u: Array, length: f
         path.append(q)
         s += step
     return np.array(path)
+
+
+def first_order_slide(hand: HandKinematics, ref: BodyRef, point_body: Array, q: Array, x0: Array, n: Array,
+                      u: Array, heights: Array, kept: list[_Kept], sl: slice) -> bool:
+    """Whether the slide's equations (module docstring) have a first-order motion at ``q`` ``(M,)``:
+    ``A dq = b``, ``A`` the Jacobian ``(k, m)`` of the sliding rows and the kept contacts' rows in the
+    finger's joints ``sl``, ``b`` zero but a unit advance along ``u``, solvable (least-squares
+    residual at most :data:`FIRST_ORDER_TOL`). Where it is not (Baxter's elbow while its forearm
+    lies on the same face: the kept forearm's rows take the freedoms the advance needs), Gauss-Newton
+    cannot advance the contact by any step and :func:`slide_path` would halve its step down to
+    ``1e-6`` object sizes (0.3 s a direction) before giving up."""
+    _, J = _slide_rows(hand, ref, point_body, q, x0, n, u, 0.0, heights)
+    _, Jk = _equations(hand, q, None, kept, sl)
+    A = np.vstack([J[:, sl], Jk])  # (k, m)
+    b = np.zeros(A.shape[0])
+    b[3] = 1.0  # the progress row u . dx = 1
+    dq = np.linalg.lstsq(A, b, rcond=1e-10)[0]
+    return float(np.linalg.norm(A @ dq - b)) <= FIRST_ORDER_TOL
 
 
 def slide_problems(nodes: GraphNodes, state: GraspState, i: int, path: Array) -> tuple[str | None, float]:
@@ -197,13 +222,15 @@ def slide_problems(nodes: GraphNodes, state: GraspState, i: int, path: Array) ->
     return None, margin
 
 
-def slide_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Transition, GraspState]]:
-    """Eq. (33) with an S-point: for every finger contact lying flat on a face of a box, slides of
-    ``slide_length`` object sizes both ways along the face's two axes (module docstring) and, towards
-    a ``contact`` goal for its body, the slide towards the goal's point (its progress the point's
-    distance in the face's plane), checked; the transitions and the states they lead to."""
-    hand, model, options = nodes.hand, nodes.model, nodes.options
-    out: list[tuple[Transition, GraspState]] = []
+def slide_candidates(nodes: GraphNodes, state: GraspState) -> list[tuple[int, Array, GraspState]]:
+    """The slides of ``state`` before their costly checks: for every finger contact lying flat on a
+    face of a box, slides of ``slide_length`` object sizes both ways along the face's two axes (module
+    docstring) and, towards a ``contact`` goal for its body, the slide towards the goal's point (its
+    progress the point's distance in the face's plane); those whose path exists (:func:`slide_path`)
+    and ends inside one face away from the other finger contacts, as ``(contact, path (n, M), state
+    after)``."""
+    hand, options = nodes.hand, nodes.options
+    out: list[tuple[int, Array, GraspState]] = []
     if not isinstance(nodes.scene.object.shape, Box) or state.dim != 3 or not state.contacts:
         return out
     length = options.slide_length * nodes.size
@@ -213,8 +240,6 @@ def slide_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Transition, 
             continue
         frame = _face_frame(state, i, nodes.scene)
         assert frame is not None
-        f = ref.finger
-        sl = hand.finger_slice(f)
         ways = [(sign * axis, length) for axis in frame[1] for sign in (1.0, -1.0)]
         goal = nodes.goal
         if goal.type == "contact" and goal.body == c.body and goal.point is not None:
@@ -237,25 +262,77 @@ def slide_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Transition, 
                    for j, cc in enumerate(state.contacts) if j != i and hand.finger_of(cc.body) is not None):
                 nodes.reject("a contact would slide next to another contact")
                 continue
-            kept_refs = [r for cc in state.contacts if (r := hand.resolve_body(cc.body)) is not None
-                         and r.finger == f]
-            with nodes.timings.measure("motion"):
-                ok, clearance, _ = path_clearance_certified(
-                    model, f, state.q, path[:, sl], state.position, state.rotation, touching_last=kept_refs,
-                    touch_from=0, allowance=transfer_allowance(nodes, state, f))
-            if not ok:
-                nodes.reject("a sliding link collides")
-                continue
-            problem, margin = slide_problems(nodes, state, i, path)
-            if problem is not None:
-                nodes.reject(problem)
-                continue
-            if nodes.held(new) is None or not nodes.arrives(new):
-                continue
-            t = _transition(nodes, state, new, i, path, margin, clearance)
-            if t is not None:
-                out.append((t, new))
+            out.append((i, path, new))
     return out
+
+
+def check_slide(nodes: GraphNodes, state: GraspState, i: int, path: Array, new: GraspState) -> Transition | None:
+    """The costly checks of a slide of contact ``i`` along ``path`` ``(n, M)`` to ``new`` (module
+    docstring): the path certified collision-free, the mechanics at every waypoint
+    (:func:`slide_problems`), the state after it holding the object (18) at its own configuration;
+    the slide's transition or None (the reason counted in ``nodes``)."""
+    hand, model = nodes.hand, nodes.model
+    ref = hand.resolve_body(state.contacts[i].body)
+    assert ref is not None and ref.finger is not None
+    f = ref.finger
+    sl = hand.finger_slice(f)
+    kept_refs = [r for cc in state.contacts if (r := hand.resolve_body(cc.body)) is not None and r.finger == f]
+    with nodes.timings.measure("motion"):
+        ok, clearance, _ = path_clearance_certified(
+            model, f, state.q, path[:, sl], state.position, state.rotation, touching_last=kept_refs,
+            touch_from=0, allowance=transfer_allowance(nodes, state, f))
+    if not ok:
+        nodes.reject("a sliding link collides")
+        return None
+    problem, margin = slide_problems(nodes, state, i, path)
+    if problem is not None:
+        nodes.reject(problem)
+        return None
+    if nodes.held(new) is None or not nodes.arrives(new):
+        return None
+    return _transition(nodes, state, new, i, path, margin, clearance)
+
+
+def slide_edges(nodes: GraphNodes, state: GraspState) -> list[tuple[Transition, GraspState]]:
+    """Eq. (33) with an S-point: the slides of :func:`slide_candidates`, checked
+    (:func:`check_slide`); the transitions and the states they lead to."""
+    out: list[tuple[Transition, GraspState]] = []
+    for i, path, new in slide_candidates(nodes, state):
+        t = check_slide(nodes, state, i, path, new)
+        if t is not None:
+            out.append((t, new))
+    return out
+
+
+def lazy_slide_edges(nodes: GraphNodes, state: GraspState) -> list[Successor]:
+    """The slides of :func:`slide_candidates` as lazy edges of the search: the path (which gives the
+    state after the slide) is computed when the state is expanded, its cost (the path's joint length
+    and the holding torque's effort) known then; :func:`check_slide` (the clearance certificate and
+    the mechanics at every waypoint, most of a slide's time) runs when the search pops the edge."""
+    out: list[Successor] = []
+    for i, path, new in slide_candidates(nodes, state):
+        grasp = nodes.analysis(state).stationary(holding_combination(state, i))
+        if grasp is None:
+            nodes.reject("no stationary grasp (18) of the holding contacts while a contact slides")
+            continue
+        cost = _cost(nodes, path, grasp.tau)
+        key = nodes.add(new, validated=False)
+
+        def validate(i: int = i, path: Array = path, new: GraspState = new) -> tuple[float, Any] | None:
+            t = check_slide(nodes, state, i, path, new)
+            if t is None:
+                return None
+            nodes.add(new)
+            return t.cost, t
+
+        out.append(Successor(key, max(cost, 1e-9), None, validate))
+    return out
+
+
+def _cost(nodes: GraphNodes, path: Array, tau: Array) -> float:
+    """A slide's cost: the joint path's length plus ``effort_weight`` times the holding torque's norm."""
+    length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
+    return length + nodes.options.effort_weight * float(np.linalg.norm(tau))
 
 
 def _transition(nodes: GraphNodes, state: GraspState, new: GraspState, i: int, path: Array, margin: float,
@@ -280,7 +357,7 @@ def _transition(nodes: GraphNodes, state: GraspState, new: GraspState, i: int, p
     length = float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
     figures = SlideFigures(hand.fingers[ref.finger].name, c.body, i, tuple(x0.tolist()), tuple(x1.tolist()),
                            tuple((x1 - x0).tolist()), gap, drift, margin, len(path), length, clearance)
-    cost = length + nodes.options.effort_weight * float(np.linalg.norm(grasp.tau))
+    cost = _cost(nodes, path, grasp.tau)
     return Transition("slide", sliding_combination(state, i), state.bodies(), new.bodies(), path,
                       np.tile(state.pose_vector(), (len(path), 1)), grasp.tau, grasp.tau, None, figures, cost)
 

@@ -32,7 +32,7 @@ from analysis.loader import load_scene
 from analysis.scene import Scene
 from planner import Goal, plan
 from planner.graph import ContactStateGraph
-from planner.link_slide import slid_state
+from planner.link_slide import slid_state, slide_edges
 from planner.options import PlannerOptions
 from planner.plan import Plan, PlanStep
 from planner.state import all_f
@@ -55,7 +55,7 @@ def slid(baxter: Scene) -> Plan:
     g = ContactStateGraph(baxter, hand, p.goal, PlannerOptions(contact_slides=True))
     state = p.steps[-1].after
     g.add(state)
-    edges = g.slide_edges(state)
+    edges = slide_edges(g, state)
     assert edges, g.rejections
     t, new = edges[0]
     held = g.analysis(new).stationary(all_f(new))
@@ -264,3 +264,71 @@ def test_a_contact_goal_is_reached_by_release_and_slide(baxter: Scene, slid: Pla
     assert float(np.linalg.norm(p.steps[-1].after.world_point(0) - end)) <= 1e-3
     assert verify_plan(baxter, p) == []
     assert not plan(baxter, goal, max_expansions=3).found
+
+
+def test_no_first_order_slide_means_gauss_newton_finds_none(baxter: Scene, slid: Plan, monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """The first-order test of :func:`planner.link_slide.first_order_slide` agrees with the waypoints'
+    Gauss-Newton run without it: in the scene's grasp (elbow and forearm on one face) the elbow has
+    no first-order slide along the face's axes and Gauss-Newton finds no path either; after the
+    forearm's release it has one in every direction, and the path is the same with and without the test."""
+    import planner.link_slide as ls
+
+    hand = HandKinematics.from_scene(baxter)
+    g = ContactStateGraph(baxter, hand, Goal(type="active"), PlannerOptions(contact_slides=True))
+    start, released = slid.steps[0].before, slid.steps[0].after
+    ways = [np.array(u) for u in ((1.0, 0, 0), (-1.0, 0, 0), (0, 0, 1.0), (0, 0, -1.0))]  # the +y face's axes
+    length = 0.05 * g.size
+    for state, expect in ((start, False), (released, True)):
+        g.add(state)
+        i = next(i for i, c in enumerate(state.contacts) if c.body == "left/left_lower_elbow")
+        with_test = [ls.slide_path(g, state, i, u, length) for u in ways]
+        monkeypatch.setattr(ls, "first_order_slide", lambda *a, **k: True)
+        without = [ls.slide_path(g, state, i, u, length) for u in ways]
+        monkeypatch.undo()
+        for a, b in zip(with_test, without, strict=True):
+            assert (a is not None) == expect and (b is not None) == expect
+            if expect:
+                np.testing.assert_array_equal(a, b)
+
+
+def test_the_graph_s_slides_are_lazy_and_validate_to_the_eager_ones(baxter: Scene, slid: Plan) -> None:
+    """The graph's slide successors are lazy (the checks deferred), their cost bound is the cost the
+    validation gives, and the validated transitions are those :func:`planner.link_slide.slide_edges`
+    gives at once (same paths and costs); an edge whose checks fail validates to None."""
+    hand = HandKinematics.from_scene(baxter)
+    state = slid.steps[0].after
+    g = ContactStateGraph(baxter, hand, Goal(type="active"), PlannerOptions(contact_slides=True))
+    g.add(state)
+    lazy = g.slide_edges(state)
+    assert lazy and all(s.validate is not None for s in lazy)
+    checked = [(s, s.validate()) for s in lazy]  # type: ignore[misc]
+    ok = [(s, v) for s, v in checked if v is not None]
+    g2 = ContactStateGraph(baxter, hand, Goal(type="active"), PlannerOptions(contact_slides=True))
+    g2.add(state)
+    eager = slide_edges(g2, state)
+    assert len(ok) == len(eager) >= 1
+    assert len(ok) < len(lazy)  # some slides fail their deferred checks (collision, leaving the face's mechanics)
+    for (s, (cost, t)), (te, new) in zip(ok, eager, strict=True):
+        assert cost == pytest.approx(s.cost, rel=0, abs=1e-12)
+        assert cost == pytest.approx(te.cost, rel=0, abs=1e-12)
+        np.testing.assert_array_equal(t.q_path, te.q_path)
+        assert g.states[s.node].key() == new.key()
+
+
+@pytest.mark.slow
+def test_the_state_after_a_planned_slide_is_where_its_path_ends(baxter: Scene) -> None:
+    """Towards the elbow goal of docs/theory.md (a point rounded to 0.1 mm), the slide towards the
+    point and the slide along +z end 40 um apart in one node; the plan's state after its slide must
+    be the one its joint path ends at (the eager edges kept the first slide's state and the cheaper
+    slide's path: the elbow's contact 40 um from where the path put it)."""
+    goal = Goal(type="contact", body="left/left_lower_elbow", point=[0.5236, 0.2, 1.1104])
+    p = plan(baxter, goal, options=PlannerOptions(contact_slides=True), max_expansions=5)
+    assert p.found, p.reason
+    assert [s.transition.kind for s in p.steps] == ["release", "slide"]
+    hand = HandKinematics.from_scene(baxter)
+    step = p.steps[-1]
+    c = step.before.contacts[0]
+    assert c.body == "left/left_lower_elbow"
+    x_end = hand.point_position(hand.resolve_body(c.body), c.point_body, step.transition.q_path[-1])  # type: ignore[arg-type]
+    assert float(np.linalg.norm(x_end - step.after.world_point(0))) <= 1e-9
+    assert verify_plan(baxter, p) == []
