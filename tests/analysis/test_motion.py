@@ -93,3 +93,21 @@ def test_fully_constrained_grasp_has_no_object_motion() -> None:
     assert full.a_bar == 0
     free = parts_of("planar_disk_envelope", "DDDDD").ms
     assert (free.a_bar, free.n_redundant, free.a) == (system.D, system.M, system.M + system.D)
+
+
+@pytest.mark.parametrize("name", EXAMPLE_NAMES)
+def test_motion_dims_match_independent_ranks(name: str) -> None:
+    """``motion_dims`` (the J_c ranks from the finger groups' blocks, :func:`analysis.motion._group_ranks`)
+    against ranks of each combination's whole A_c and J_c by numpy, on every combination (at most
+    the seeded 300 of the wrap): ``a = M + D - rank(A_c)``, ``a_bar = a - dim null(J_c)``."""
+    from analysis.contacts import constrained_matrices, selection
+    from analysis.motion import motion_dims
+
+    sy = example_system(name)
+    combos = sample_combinations(sy, 300, seed=11)
+    a, a_bar = motion_dims(sy, combos)
+    for c, ak, abk in zip(combos, a, a_bar, strict=True):
+        A_c = constrained_matrices(sy, selection(sy, c))[0]  # (L_c, M + D)
+        r_A, r_J = _rank(A_c), _rank(A_c[:, : sy.M])
+        assert ak == sy.M + sy.D - r_A, c
+        assert abk == ak - (sy.M - r_J), c
