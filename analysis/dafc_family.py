@@ -221,6 +221,21 @@ class FamilyKinematics:
         self.M = M
         self._cache: dict[tuple[int, str, tuple[int, ...]], Array | None] = {}
         self._slip_cache: dict[tuple[int, str], bool] = {}
+        self._gen_cols: list[Array] | None = None
+
+    def generator_columns(self) -> list[Array]:
+        """Per contact ``j``: ``(k'_j, L, d)``, the contact forces of the weights of its friction
+        pyramid's generators (generator ``e`` in row ``j``, zero elsewhere), the F-point unknowns
+        of :func:`members_at`; built once."""
+        if self._gen_cols is None:
+            sy = self.system
+            cols = []
+            for j, gens in enumerate(sy.pyramid[1]):
+                block = np.zeros((len(gens), sy.L, sy.d))
+                block[:, j] = gens
+                cols.append(block)
+            self._gen_cols = cols
+        return self._gen_cols
 
     def slip_depends(self, combination: str) -> bool:
         """:func:`slip_depends_on_redundancy` group by group: ``null(J_c)`` is the direct sum of
@@ -484,7 +499,6 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
     a_bar = np.sum(s2 > RANK_RTOL * np.maximum(1.0, s2[:, :1]), axis=1)  # (B,)
     # one block per pair: [lambda (F: weights of the friction pyramid's generators, S/N: the normal
     # force), units of F0; e+; e-], rows: grip, passive equalities
-    gens = sy.pyramid[1]  # (L, k', d) generators of each contact's friction cone
     cols_c: list[Array] = []
     trip_r: list[Array] = []
     trip_c: list[Array] = []
@@ -494,19 +508,21 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
     layout: list[tuple[int, int, int, Array, Array, Array]] = []
     n_col = n_row = 0
     ok = np.ones(B, dtype=bool)
+    gen_cols = kin.generator_columns()  # per contact (k'_j, L, d): its generators as unknowns' forces
+    normal_of: list[dict[int, int]] = []  # per pair: the unknown of each S/N-point
     for b, (comb, v) in enumerate(pairs):
         rel = kin.A @ v  # (L, d) finger point minus object point velocity
         size = float(np.linalg.norm(v))
-        Fc: list[Array] = []  # contact force (L, d) per unit of each unknown
+        Fc: list[Array] = []  # contact forces (k_j, L, d) of the unknowns, contact by contact
+        n_unknowns = 0
+        own: dict[int, int] = {}
         for j, s in enumerate(comb):
             n_j = sy.normals[j]
             along = float(n_j @ rel[j])
             if s == "F":
                 ok[b] &= float(np.linalg.norm(rel[j])) <= MOTION_TOL * size
-                for e in gens[j]:
-                    col = np.zeros((L, d))
-                    col[j] = e
-                    Fc.append(col)
+                Fc.append(gen_cols[j])
+                n_unknowns += gen_cols[j].shape[0]
             elif s in "SN":
                 ok[b] &= abs(along) <= MOTION_TOL * size
                 t = np.zeros(d)
@@ -514,13 +530,16 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
                     slip = -rel[j]  # the object point relative to the finger
                     ok[b] &= float(np.linalg.norm(slip)) > SLIP_TOL * size
                     t = -sy.mu[j] * slip / max(1e-300, float(np.linalg.norm(slip)))
-                col = np.zeros((L, d))
-                col[j] = n_j + t
+                col = np.zeros((1, L, d))
+                col[0, j] = n_j + t
                 Fc.append(col)
+                own[j] = n_unknowns
+                n_unknowns += 1
             else:
                 ok[b] &= along <= ALLOW_TOL
+        normal_of.append(own)
         Xi = V2[b, a_bar[b]:, :]  # (p, D) complement of the object motions
-        Fm = np.array(Fc).reshape(-1, L, d)  # (k, L, d)
+        Fm = np.concatenate(Fc) if Fc else np.zeros((0, L, d))  # (k, L, d)
         W = np.einsum("ldc,klc->dk", sy.G_blocks.transpose(0, 1, 2), Fm) if len(Fc) else np.zeros((D, 0))
         k, p = W.shape[1], Xi.shape[0]
         dr = v[M:]
@@ -573,7 +592,7 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
                 fric = max(fric, float(np.max(kin.facets[j] @ forces[j])))
                 grip += float(kin.grip_normals[j] @ forces[j])
             elif s in "SN":
-                n_f = float(sy.normals[j] @ forces[j]) if s == "N" else float(lam_normal(lam, Fm, j)) * F0
+                n_f = float(sy.normals[j] @ forces[j]) if s == "N" else float(lam[normal_of[b][j]]) * F0
                 fric = max(fric, -n_f)
                 grip += n_f
         if not (fric <= FORCE_TOL * F0 and grip <= sc.grip_bound * (1.0 + FORCE_TOL)
@@ -589,18 +608,12 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
                 f_c[j] = np.nan
                 f_F[j] = forces[j]
             elif s in "SN":
-                f_c[j] = float(lam_normal(lam, Fm, j)) * F0
+                f_c[j] = float(lam[normal_of[b][j]]) * F0
                 if s == "S":
                     slips[j] = -rel[j] / float(np.linalg.norm(rel[j]))
         out[b] = MemberCertificate(comb, dr.copy(), v, f_c, f_F, slips, V2[b, :a_bar[b], :].T.copy(),
                                    Vt[b, rank[b]:, :].T.copy())
     return out
-
-
-def lam_normal(lam: Array, Fm: Array, j: int) -> float:
-    """The normal force (units of the unknowns) of the S/N-point ``j``: its one unknown's weight."""
-    k = int(np.flatnonzero(np.any(Fm[:, j] != 0.0, axis=1))[0])
-    return float(lam[k])
 
 
 def probe_motions(kin: FamilyKinematics, combinations: list[str]) -> list[list[Array]]:

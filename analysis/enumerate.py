@@ -26,10 +26,10 @@ import itertools
 import multiprocessing as mp
 import os
 import re
-from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -282,6 +282,7 @@ class _Enumeration:
         self.kin = FamilyKinematics(system)
         self.symmetries = symmetries(system)
         self.symmetric_empty = False
+        self._shared_sent = 0  # rows of self.shared sent for their dimensions (_submit_shared)
 
     def _tick(self) -> None:
         if self.progress is not None:
@@ -296,7 +297,7 @@ class _Enumeration:
             return self._run(workers, limit)
         finally:
             if self.pool is not None:
-                self.pool.shutdown()
+                self.pool.shutdown(cancel_futures=True)  # speculative searches left after an error
 
     def _run(self, workers: int, limit: int | None) -> tuple[dict[str, CombinationSummary], EnumerationStats]:
         sy, st, res = self.system, self.stats, self.results
@@ -403,21 +404,37 @@ class _Enumeration:
         self.stats.dafc_shared += 1
         self.queue.pop(c, None)
 
-    def _finish_shared(self, pool: ProcessPoolExecutor | None, workers: int = 1) -> None:
-        """The DAFC dimension and exactness of the rows decided by a stronger row's member
-        (:func:`_shared_dims`, in the worker processes when there are any); a row whose allowable
-        cone has no direction (cdd failing) gets its own search."""
-        rows: list[tuple[str, Array, int]] = []
-        for c in self.shared:
+    def _shared_rows(self, rows: list[str]) -> list[tuple[str, Array, int]]:
+        out: list[tuple[str, Array, int]] = []
+        for c in rows:
             m = self.results[c].example_motion
             assert m is not None
-            rows.append((c, m, self.dims[c][1]))
+            out.append((c, m, self.dims[c][1]))
+        return out
+
+    def _submit_shared(self, pool: ProcessPoolExecutor, workers: int) -> None:
+        """Send the shared rows decided since the last call to the worker processes for their
+        DAFC dimensions (:func:`_shared_dims`, a function of the row and its member alone), so that
+        the workers compute them while the main process commits the next level."""
+        new = self.shared[self._shared_sent:]
+        if not new:
+            return
+        self._shared_sent = len(self.shared)
+        n = max(MIN_BATCH, len(new) // (2 * workers) + 1)
+        for k in range(0, len(new), n):
+            self._shared_futures.append(pool.submit(_worker_dims, self._shared_rows(new[k:k + n])))
+
+    def _finish_shared(self, pool: ProcessPoolExecutor | None, workers: int = 1) -> None:
+        """The DAFC dimension and exactness of the rows decided by a stronger row's member
+        (:func:`_shared_dims`, in the worker processes when there are any: the chunks sent level by
+        level, :meth:`_submit_shared`); a row whose allowable cone has no direction (cdd failing)
+        gets its own search."""
+        rows = self._shared_rows(self.shared)
         if pool is None:
             out = _shared_dims(self.system, self.kin, rows)
         else:
-            n = max(1, len(rows) // (4 * workers) + 1)
-            parts = [rows[k:k + n] for k in range(0, len(rows), n)]
-            out = [x for chunk in pool.map(_worker_dims, parts) for x in chunk]
+            self._submit_shared(pool, workers)
+            out = [x for chunk in self._gather(self._shared_futures) for x in chunk]
         for (c, _, _), (dim, exact) in zip(rows, out, strict=True):
             r = self.results[c]
             if dim is None:
@@ -427,6 +444,60 @@ class _Enumeration:
                 continue
             self.results[c] = CombinationSummary(c, True, "feasible", r.a, r.a_bar, dim, r.dim_dpfc, exact,
                                                  r.example_direction, r.example_motion)
+
+    # -- worker processes: tasks submitted ahead, speculative own searches ---------------------------
+
+    def _map(self, fn: Callable[[Any], _T], items: list[Any]) -> Iterator[_T]:
+        """``fn`` over ``items`` in the worker processes, all sent at once, the results yielded in
+        order as each is ready (the main process commits one while the workers compute the next),
+        serving the speculative searches (:meth:`_poll`) while it waits."""
+        assert self.pool is not None
+        return self._in_order([self.pool.submit(fn, x) for x in items])
+
+    def _in_order(self, futures: list[Future[_T]]) -> Iterator[_T]:
+        for f in futures:
+            yield self._gather([f])[0]
+
+    def _gather(self, futures: list[Future[Any]]) -> list[Any]:
+        """The results of ``futures`` in order; while waiting, every speculative search that
+        ends is looked at (:meth:`_poll`), so that the searches it calls for start at once."""
+        pending = set(futures)
+        while True:
+            self._poll()
+            pending = {f for f in pending if not f.done()}
+            if not pending:
+                break
+            wait(pending | {f for f in self._spec.values() if not f.done()}, return_when=FIRST_COMPLETED)
+        return [f.result() for f in futures]
+
+    def _speculate(self, rows: Iterable[str]) -> None:
+        """Start the own searches of the undecided ``rows`` in the worker processes now, before
+        the strongest-first order reaches them. :func:`_own_search` is a function of the row
+        alone, so a result is the same whenever it is computed; :meth:`_search` takes it when the
+        order reaches an undecided row, and a row decided otherwise meanwhile discards it (CPU
+        only: the table and the counts of LPs are those of one process)."""
+        if self.pool is None:
+            return
+        for c in rows:
+            if c in self.pending and c not in self.results and c not in self._spec:
+                self._spec[c] = self.pool.submit(_worker_search, c)
+
+    def _poll(self) -> None:
+        """A speculative search that ended with DAFC empty: the undecided rows of its orbit under
+        the scene's symmetries will need their own searches too (no member of the orbit exists
+        to mirror onto them, :meth:`_mirror`), so they start now."""
+        for c, f in list(self._spec.items()):
+            if c in self._polled or not f.done():
+                continue
+            self._polled.add(c)
+            if not self.symmetric_empty and not f.cancelled() and f.exception() is None and not f.result()[0].feasible:
+                self._speculate(g.combination(c) for g in self.symmetries)
+
+    def _drop_speculation(self) -> None:
+        """Cancel the speculative searches of rows decided otherwise (those already running end
+        unused)."""
+        for c in [c for c in self._spec if c in self.results]:
+            self._spec.pop(c).cancel()
 
     def _dafc(self, workers: int, limit: int | None) -> None:
         """DAFC of the rows whose stationary grasp exists, level by level (the sum of the force
@@ -438,7 +509,10 @@ class _Enumeration:
         straight to their own search) and then the own searches, each first for
         one row of every orbit of the scene's symmetries and, after the images of the members found
         so far (:meth:`_mirror`), for the rest; results are committed in that order, so the table
-        does not depend on the number of workers."""
+        does not depend on the number of workers. With workers, the tasks of a step are sent at
+        once and committed in order as each is ready, the own searches that the order will need
+        start early (:meth:`_speculate`) and the shared rows' dimensions are computed level by level
+        (:meth:`_submit_shared`), so that the workers keep busy while the main process commits."""
         self.pending = set(self.dafc_rows)
         # the pending rows not decided whose queue is not full, by base-3 code (F 0, S/N 1, D 2)
         L = self.system.L
@@ -454,6 +528,9 @@ class _Enumeration:
         self.shared: list[str] = []  # decided by a stronger combination's member
         self.mirrored: set[tuple[str, str]] = set()  # (row, symmetric row) whose member was tried on it
         self.mirror_sources: set[str] = set()  # rows whose member's images were tried
+        self._spec: dict[str, Future[tuple[CombinationSummary, MemberCertificate | None, int]]] = {}
+        self._polled: set[str] = set()  # speculative searches looked at by _poll
+        self._shared_futures: list[Future[list[tuple[int | None, bool]]]] = []
         levels: dict[int, list[str]] = {}
         for c in self.dafc_rows:
             levels.setdefault(sum(CLASS[x] for x in c), []).append(c)
@@ -465,8 +542,8 @@ class _Enumeration:
                 if not todo:
                     break
                 batches = _batches([(c, self.queue[c][0]) for c in todo])
-                outs = (pool.map(_worker_batch, batches) if pool is not None else
-                        (members_at(self.kin, b) for b in batches))
+                outs = (self._map(_worker_batch, batches) if pool is not None else
+                        [members_at(self.kin, b) for b in batches])
                 for pairs, good in zip(batches, outs, strict=True):
                     self.stats.dafc_lps += len(pairs)
                     self.stats.dafc_batched += len(pairs)
@@ -480,7 +557,9 @@ class _Enumeration:
             # images of their members decide most of the others without probes or a search
             self._mirror(rows, pool)
             first, rest = self._representatives([c for c in rows if c not in self.results])
-            self._probe([c for c in first if not self._direct(c)], pool)
+            # the rows sent straight to their own search start it while the others are probed
+            self._probe([c for c in first if not self._direct(c)], pool, then=[c for c in first if self._direct(c)])
+            self._speculate(first)  # those the probes did not decide
             self._mirror(rows, pool)
             self._probe([c for c in rest if c not in self.results and not self._direct(c)], pool)
             self._mirror(rows, pool)
@@ -490,9 +569,15 @@ class _Enumeration:
             if self.symmetric_empty:
                 self._mirror_empty(first)
             self._search([c for c in rest if c not in self.results], pool)
+            if pool is not None:
+                self._drop_speculation()
+                self._submit_shared(pool, workers)
             self._tick()
             if limit is not None and self._reached(limit, rows[-1]):
                 break
+        for f in self._spec.values():
+            f.cancel()
+        self._spec.clear()
         self._finish_shared(pool, workers)
 
     def _direct(self, c: str) -> bool:
@@ -507,9 +592,16 @@ class _Enumeration:
         """The own searches of ``todo``, committed in its order."""
         # one search per task: they differ by 100x in cost (a slip-sector search runs up to its
         # budget), so chunks of several left a worker idle at the end of a level
-        found = (pool.map(_worker_search, todo, chunksize=1)
-                 if pool is not None else (_own_search(self.system, c) for c in todo))
-        for k, (c, out) in enumerate(zip(todo, found, strict=True)):
+        if pool is None:
+            for k, c in enumerate(todo):
+                self._commit(c, *_own_search(self.system, c))
+                if k % 64 == 63:
+                    self._tick()
+            return
+        self._speculate(todo)
+        for k, c in enumerate(todo):
+            out = self._gather([self._spec[c]])[0]
+            del self._spec[c]
             self._commit(c, *out)
             if k % 64 == 63:
                 self._tick()
@@ -553,7 +645,7 @@ class _Enumeration:
         if not pairs:
             return
         batches = _batches(pairs)
-        outs = pool.map(_worker_batch, batches) if pool is not None else (members_at(self.kin, b) for b in batches)
+        outs = self._map(_worker_batch, batches) if pool is not None else [members_at(self.kin, b) for b in batches]
         for batch, certs in zip(batches, outs, strict=True):
             self.stats.dafc_lps += len(batch)
             self.stats.dafc_batched += len(batch)
@@ -580,11 +672,17 @@ class _Enumeration:
                 self._close(c2)
                 self.stats.dafc_mirrored_empty += 1
 
-    def _probe(self, rows: list[str], pool: ProcessPoolExecutor | None) -> None:
+    def _probe(self, rows: list[str], pool: ProcessPoolExecutor | None, then: list[str] | None = None) -> None:
         """Canonical motions of ``rows`` (:func:`probe_motions`) tried by batched force LPs before
-        their own searches; a member's certificate is shared as an own search's is."""
+        their own searches; a member's certificate is shared as an own search's is. ``then``: rows
+        whose own searches start (:meth:`_speculate`) after the probes are sent."""
         chunks = _batches(rows)
-        outs = (pool.map(_worker_probe, chunks) if pool is not None else (_probe(self.kin, ch) for ch in chunks))
+        if pool is not None:
+            futures = [pool.submit(_worker_probe, ch) for ch in chunks]
+            self._speculate(then or [])
+            outs: Iterable[tuple[list[MemberCertificate | None], int]] = self._in_order(futures)
+        else:
+            outs = [_probe(self.kin, ch) for ch in chunks]
         for chunk, (certs, tried) in zip(chunks, outs, strict=True):
             self.stats.dafc_lps += tried
             self.stats.dafc_batched += tried
