@@ -608,6 +608,8 @@ def plan(
     replay met it); 1 no plan was found (the reason is printed); 2 bad input; 3 (--replay) the
     replay dropped the object or ended outside its tolerance."""
 
+    import dataclasses
+
     from planner import Goal
     from planner import plan as make_plan
     from planner.options import PlannerOptions
@@ -643,12 +645,12 @@ def plan(
             bar.update(task, completed=fraction, description=message[:60])
 
         try:
-            result = make_plan(sc, g, progress=step, time_limit=time_limit,
-                               options=PlannerOptions(link_replacement=link_replacement, sliding_motions=sliding,
-                                                      contact_slides=contact_slides, link_sliding=link_sliding,
-                                                      separate_finger_contacts=separate_finger_contacts,
-                                                      **({} if effort_weight is None
-                                                         else {"effort_weight": effort_weight})))
+            options = PlannerOptions(link_replacement=link_replacement, sliding_motions=sliding,
+                                     contact_slides=contact_slides, link_sliding=link_sliding,
+                                     separate_finger_contacts=separate_finger_contacts)
+            if effort_weight is not None:  # else the planner's default
+                options = dataclasses.replace(options, effort_weight=effort_weight)
+            result = make_plan(sc, g, progress=step, time_limit=time_limit, options=options)
         except SceneError as e:
             _fail(str(e))
         except CTPError as e:
