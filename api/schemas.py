@@ -78,7 +78,8 @@ class AnalysisPublic(BaseModel):
 
 class PlannerSwitches(_In):
     """The planner's optional kinds of edges (``planner.options.PlannerOptions``; ``ctp plan``'s
-    flags of the same names). Each adds states to the search, so each is off unless asked."""
+    flags of the same names). Each adds states to the search, so each is off unless asked; and the
+    weight of the effort term in the edge costs (null: the planner's default)."""
 
     sliding_motions: Annotated[bool | None, Field(strict=True)] = Field(
         None, description="object motions in which the contacts on fixed bodies slide (S) while the fingers "
@@ -96,6 +97,10 @@ class PlannerSwitches(_In):
     separate_finger_contacts: Annotated[bool, Field(strict=True)] = Field(
         False, description="object motions may also separate single finger contacts, not only those on fixed "
                            "bodies")
+    effort_weight: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] | None = Field(
+        None, description="weight of a transition's effort (|joint torques|, N m) in its cost, >= 0; null: the "
+                          "planner's default 0.1 (0: the cheapest plan by motions and contacts only, e.g. a "
+                          "sphere rolled on a link's side rather than pushed by a fingertip)")
 
 
 class PlanCreate(_In):

@@ -7,6 +7,7 @@
     .venv/bin/python benchmarks/planning.py --lift          # also the two-arm 3 cm box lift (target < 60 s)
     .venv/bin/python benchmarks/planning.py --wrap          # also the nine-contact wrap (target: a plan < 60 s)
     .venv/bin/python benchmarks/planning.py --roll          # also a sphere rolled 5 cm on a table (3-D rolling)
+    .venv/bin/python benchmarks/planning.py --link-roll     # also a sphere rolled on a link's side (effort weight 0)
     .venv/bin/python benchmarks/planning.py --all           # every scene above
 
 For each scene: whether a plan to active closure was found, its steps, nodes expanded and
@@ -86,7 +87,11 @@ def main() -> None:
     ap.add_argument("--wrap", action="store_true", help="also sphere_four_finger_wrap to active closure (9 contacts)")
     ap.add_argument("--roll", action="store_true",
                     help="also sphere_table_roll: a finger rolls the sphere 5 cm along the table (no sliding)")
-    ap.add_argument("--all", action="store_true", help="every scene: --sphere --slide --lift --wrap --roll")
+    ap.add_argument("--link-roll", action="store_true",
+                    help="also sphere_link_roll: a link's side rolls the sphere 5 cm along the table (no sliding, "
+                         "effort weight 0 as ctp plan --effort-weight 0)")
+    ap.add_argument("--all", action="store_true",
+                    help="every scene: --sphere --slide --lift --wrap --roll --link-roll")
     ap.add_argument("--time-limit", type=float, default=None)
     args = ap.parse_args()
     print("machine:", machine())
@@ -106,6 +111,10 @@ def main() -> None:
         run("sphere_table_roll", 10.0, args.repeat, args.time_limit or 120.0,
             Goal(type="displacement", displacement=[0.05, 0.0, 0.0, 0.0, 0.0, 0.0], position_tolerance=0.005,
                  rotation_tolerance="free"), PlannerOptions(sliding_motions=False))
+    if args.link_roll or args.all:  # rolling on a moving link's side (planner/link_roll.py)
+        run("sphere_link_roll", 10.0, args.repeat, args.time_limit or 120.0,
+            Goal(type="displacement", displacement=[0.05, 0.0, 0.0, 0.0, 0.0, 0.0], position_tolerance=0.005,
+                 rotation_tolerance="free"), PlannerOptions(sliding_motions=False, effort_weight=0.0))
 
 
 if __name__ == "__main__":

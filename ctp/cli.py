@@ -589,6 +589,9 @@ def plan(
     separate_finger_contacts: Annotated[bool, typer.Option(
         help="object motions may also separate single finger contacts, not only those on fixed bodies "
              "(more edges, slower)")] = False,
+    effort_weight: Annotated[float | None, typer.Option(
+        help="weight of a transition's effort (joint torque, N m) in its cost, >= 0; default 0.1 "
+             "(0: the cheapest plan by motions and contacts only, e.g. rolling on a link's side)")] = None,
     out: Annotated[Path | None, typer.Option(help="write the plan as JSON")] = None,
     replay: Annotated[bool, typer.Option(help="replay the whole plan in MuJoCo (one continuous simulation)")] = False,
     posture_rate: Annotated[float, typer.Option(help="--replay: " + POSTURE_HELP)] = POSTURE_RATE,
@@ -605,11 +608,15 @@ def plan(
     replay met it); 1 no plan was found (the reason is printed); 2 bad input; 3 (--replay) the
     replay dropped the object or ended outside its tolerance."""
 
+    import dataclasses
+
     from planner import Goal
     from planner import plan as make_plan
     from planner.options import PlannerOptions
 
     _check_out(out, "--out")
+    if effort_weight is not None and not (np.isfinite(effort_weight) and effort_weight >= 0):
+        _fail(f"--effort-weight: {effort_weight} must be a finite number >= 0")
     sc = _load(scene)
     rot: float | str | None = rotation_tolerance
     if rotation_tolerance is not None and rotation_tolerance.strip().lower() != "free":
@@ -638,10 +645,12 @@ def plan(
             bar.update(task, completed=fraction, description=message[:60])
 
         try:
-            result = make_plan(sc, g, progress=step, time_limit=time_limit,
-                               options=PlannerOptions(link_replacement=link_replacement, sliding_motions=sliding,
-                                                      contact_slides=contact_slides, link_sliding=link_sliding,
-                                                      separate_finger_contacts=separate_finger_contacts))
+            options = PlannerOptions(link_replacement=link_replacement, sliding_motions=sliding,
+                                     contact_slides=contact_slides, link_sliding=link_sliding,
+                                     separate_finger_contacts=separate_finger_contacts)
+            if effort_weight is not None:  # else the planner's default
+                options = dataclasses.replace(options, effort_weight=effort_weight)
+            result = make_plan(sc, g, progress=step, time_limit=time_limit, options=options)
         except SceneError as e:
             _fail(str(e))
         except CTPError as e:

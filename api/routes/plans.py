@@ -57,7 +57,9 @@ def create_plan(raw: Annotated[PlanCreate, SkipValidation], settings: SettingsDe
     if body.replay:
         request["replay"] = True  # only when asked: other requests keep their stored form
     if body.options is not None:
-        request["options"] = body.options.model_dump(mode="json", exclude_unset=True)  # the switches given
+        # the switches given; an effort_weight of null is the planner's default, stored as not given
+        request["options"] = {k: v for k, v in body.options.model_dump(mode="json", exclude_unset=True).items()
+                              if not (k == "effort_weight" and v is None)}
     job = _jobs.submit(store, runner, KIND, request)
     response.headers["Location"] = f"/plans/{job.id}"
     return _jobs.public(job, "/plans")

@@ -522,6 +522,12 @@ async function startJob(kind) {
   // the planner options ticked (POST /plans options; none: the request as before)
   const options = {};
   for (const box of document.querySelectorAll("#plan-options input[data-option]")) if (box.checked) options[box.dataset.option] = true;
+  for (const box of document.querySelectorAll("#plan-options input[data-number-option]")) {  // empty: the default
+    const v = box.value.trim() === "" ? null : Number(box.value);
+    if (box.validity.badInput || (v !== null && !(Number.isFinite(v) && v >= 0))) {
+      if (kind === "plan") { $("job-error").textContent = `${box.dataset.numberOption}: a number >= 0, or empty for the default`; return; }
+    } else if (v !== null) options[box.dataset.numberOption] = v;
+  }
   const body = kind === "plan"
     ? { scene, goal, ...($("replay-check").checked ? { replay: true } : {}), ...(Object.keys(options).length ? { options } : {}) }
     : { scene };

@@ -437,8 +437,8 @@ def test_plan_options_are_the_planners_switches_stored_as_given(client: TestClie
     from planner.options import PlannerOptions
 
     defaults = {f.name: f.default for f in dataclasses.fields(PlannerOptions)}
-    for name, field in PlannerSwitches.model_fields.items():
-        assert name in defaults and field.default == defaults[name], name
+    for name, field in PlannerSwitches.model_fields.items():  # effort_weight null: the planner's default
+        assert name in defaults and field.default == (None if name == "effort_weight" else defaults[name]), name
     store = client.app.state.store  # type: ignore[attr-defined]
     r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}, "time_limit": 5,
                                     "options": {"contact_slides": True, "sliding_motions": False}})
@@ -450,6 +450,29 @@ def test_plan_options_are_the_planners_switches_stored_as_given(client: TestClie
     assert r.status_code == 422 and r.json()["detail"].startswith("options.fly:"), r.text
     r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}, "options": {"link_sliding": "yes"}})
     assert r.status_code == 422 and r.json()["detail"].startswith("options.link_sliding:"), r.text
+
+
+def test_plan_effort_weight_is_a_finite_non_negative_number_stored_when_given(client: TestClient) -> None:
+    """``options.effort_weight``: stored as given (0 included); null is the planner's default and
+    stored as not given (the request's former form); -1, NaN, infinity, a string or a boolean are
+    422 naming ``options.effort_weight``, and no job is stored."""
+    store = client.app.state.store  # type: ignore[attr-defined]
+    for given, stored in ((0, {"effort_weight": 0.0}), (0.25, {"effort_weight": 0.25}),
+                          ({"effort_weight": None, "link_sliding": True}, {"link_sliding": True}),
+                          ({"effort_weight": None}, {})):
+        options = given if isinstance(given, dict) else {"effort_weight": given}
+        r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active"}, "time_limit": 5,
+                                        "options": options})
+        assert r.status_code == 202, r.text
+        assert store.get(r.json()["id"]).request["options"] == stored, given
+    before = client.get("/plans").json()["count"]
+    for bad in ("-1", "NaN", "Infinity", "-Infinity", '"0.1"', "true"):  # raw JSON: NaN is not in json=
+        text = json.dumps({"scene": PLANAR, "goal": {"type": "active"}, "options": {"effort_weight": 0}})
+        text = text.replace('"effort_weight": 0}', f'"effort_weight": {bad}}}')
+        r = client.post("/plans", content=text, headers={"content-type": "application/json"})
+        assert r.status_code == 422, (bad, r.text)
+        assert r.json()["detail"].startswith("options.effort_weight:"), (bad, r.text)
+    assert client.get("/plans").json()["count"] == before
 
 
 def test_a_plan_job_runs_the_planner_with_its_options(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -467,5 +490,7 @@ def test_a_plan_job_runs_the_planner_with_its_options(monkeypatch: pytest.Monkey
     monkeypatch.setattr(planner, "plan", spy)
     run_plan({"scene": PLANAR, "goal": {"type": "active"}, "options": {"link_replacement": True}})
     assert seen[-1] == PlannerOptions(link_replacement=True)
+    run_plan({"scene": PLANAR, "goal": {"type": "active"}, "options": {"effort_weight": 0.0, "sliding_motions": False}})
+    assert seen[-1] == PlannerOptions(effort_weight=0.0, sliding_motions=False)
     run_plan({"scene": PLANAR, "goal": {"type": "active"}})
     assert seen[-1] is None

@@ -278,12 +278,21 @@ def test_docs_offline_and_job_state(tmp_path: Path) -> None:
         page.click("#plan-options summary")
         page.check("#plan-options input[data-option='contact_slides']")
         page.check("#plan-options input[data-option='link_replacement']")
+        # an effort weight below 0 is refused on the page: said so, no plan posted
+        posted: list[str] = []
+        page.on("request", lambda r: posted.append(r.url) if r.method == "POST" else None)
+        page.fill("#effort-weight", "-1")
+        page.click("#plan-btn")
+        expect(page.locator("#job-error")).to_contain_text("effort_weight: a number >= 0")
+        assert not posted, posted
+        page.fill("#effort-weight", "0")  # 0 is sent as a number (empty: not sent, the planner's 0.1)
         with page.expect_request(lambda r: r.method == "POST" and r.url.endswith("/plans")) as sent:
             page.click("#plan-btn")
         assert json.loads(sent.value.post_data or "{}")["options"] == {"contact_slides": True,
-                                                                       "link_replacement": True}
+                                                                       "link_replacement": True, "effort_weight": 0}
         page.uncheck("#plan-options input[data-option='contact_slides']")  # the later plans without them
         page.uncheck("#plan-options input[data-option='link_replacement']")
+        page.fill("#effort-weight", "")
         expect(page.locator("#job-status[data-job-id]")).to_have_count(1, timeout=30_000)
         job_id = page.locator("#job-status").get_attribute("data-job-id")
         page.select_option("#example-select", "sphere_four_finger_palm.json")

@@ -85,3 +85,10 @@ def test_a_plan_file_that_is_not_text_exits_2(tmp_path: Path) -> None:
     path.write_bytes(b"\xff" * 64)
     line = _one_error_line(runner.invoke(app, ["simulate", str(path)]))
     assert "not UTF-8 text" in line
+
+
+@pytest.mark.parametrize("bad", ["-1", "nan", "inf", "-inf"])
+def test_a_bad_effort_weight_exits_2_naming_the_flag(bad: str) -> None:
+    """``ctp plan --effort-weight`` takes a finite weight >= 0, checked before the scene is read."""
+    line = _one_error_line(runner.invoke(app, ["plan", str(PLANAR), "--effort-weight", bad]))
+    assert line.startswith("error: --effort-weight:") and "finite number >= 0" in line, line

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -165,6 +166,29 @@ def test_ctp_plan_switch_flags_reach_the_planner(monkeypatch, name: str) -> None
         r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
         assert r.exit_code in (0, 1), r.output
         assert seen[-1] is not None and getattr(seen[-1], name) is want
+
+
+def test_ctp_plan_effort_weight_reaches_the_planner(monkeypatch) -> None:  # type: ignore[no-untyped-def]
+    """``--effort-weight W`` sets ``PlannerOptions.effort_weight`` (without it: the default 0.1)
+    and nothing else of the options."""
+    import planner
+    from planner.options import PlannerOptions
+
+    seen: list[PlannerOptions | None] = []
+    real = planner.plan
+
+    def spy(*args, options=None, **kwargs):  # type: ignore[no-untyped-def]
+        seen.append(options)
+        return real(*args, options=options, max_expansions=1, **kwargs)
+
+    monkeypatch.setattr(planner, "plan", spy)
+    scene = str(Path(__file__).resolve().parents[2] / "examples" / "planar_disk_envelope.json")
+    for flag, want in (([], PlannerOptions().effort_weight), (["--effort-weight", "0"], 0.0),
+                       (["--effort-weight", "2.5"], 2.5)):
+        r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
+        assert r.exit_code in (0, 1), r.output
+        assert seen[-1] is not None and seen[-1].effort_weight == want
+        assert dataclasses.replace(seen[-1], effort_weight=PlannerOptions().effort_weight) == PlannerOptions()
 
 
 @pytest.mark.slow
