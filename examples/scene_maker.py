@@ -1,5 +1,6 @@
 """What the ``examples/make_*.py`` scripts share: writing a generated scene (or, with ``--check``,
-comparing it with the committed file) and the pushing finger of the rolling examples."""
+comparing it with the committed file), the pushing finger of the rolling examples and their sphere on a
+table."""
 
 from __future__ import annotations
 
@@ -60,3 +61,27 @@ def pushing_finger(centre: np.ndarray, radius: float, elevation: float, base: np
         "q": [0.0, round(th1, 12), round(th2 - th1, 12)],
     }
     return finger, tip, out
+
+
+def sphere_on_table(name: str, description: str, radius: float, finger: dict[str, Any], contact: np.ndarray,
+                    out: np.ndarray, mu: float) -> dict[str, Any]:
+    """The rolling examples' scene: a sphere of ``radius`` resting on a table (a fixed box whose top
+    face is ``z = 0``) with its centre at ``(0, 0, radius)``, a unit weight, and two contacts of
+    friction ``mu``: the finger's last link ``f/2`` at ``contact`` (normal ``-out``, into the
+    sphere) and the table under the sphere."""
+    return {
+        "name": name,
+        "description": description,
+        "dim": 3,
+        "object": {"pose": {"position": [0.0, 0.0, radius], "quat_wxyz": [1.0, 0.0, 0.0, 0.0]},
+                   "shape": {"type": "sphere", "radius": radius}},
+        "external_wrench": [0.0, 0.0, -1.0, 0.0, 0.0, 0.0],
+        "fixed_bodies": [{"name": "table", "shape": {"type": "box", "size": [4.0, 3.0, 0.1],
+                                                     "position": [0.0, 0.0, -0.05]}}],
+        "fingers": [finger],
+        "contacts": [
+            {"body": "f/2", "point": [float(v) for v in np.round(contact, 12)],
+             "normal": [float(v) for v in np.round(-out, 12)], "mu": mu},
+            {"body": "table", "point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "mu": mu},
+        ],
+    }

@@ -531,20 +531,26 @@ def _plane_rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, 
             if abs(travel - r * turn) > ROLL_TOL:
                 out.append(f"{tag}: rolling contact {i} ({c.body}): the contact point travels {travel:.6g} on the "
                            f"{name}, not r times the rolling turn {r * turn:.6g}")
-        # the contact on the same body nearest the rolled point (a cylinder has two on the table)
         y = after.position + z * after.pose.rotation[:, 2] - r * n  # (3,) where it touches the plane at the end
-        errs = [max(float(np.linalg.norm(hand.point_position(ref, after.contacts[j].point_body, after.q) - y)),
-                    float(np.linalg.norm(after.world_point(j) - y)),
-                    r * float(np.linalg.norm(after.world_normal(j) - n)))
-                for j, name in enumerate(after.bodies()) if name == c.body]
-        if not errs:
-            out.append(f"{tag}: rolling contact {i} ({c.body}) is missing after the step")
-            continue
-        err = min(errs)
-        if err > ROLL_TOL:
-            out.append(f"{tag}: the state after the step does not have contact {i} ({c.body}) where it rolled "
-                       f"(off by {err:.3g})")
+        out.extend(_rolled_contact_problems(hand, ref, after, c.body, y, n, r, tag, i))
     return out
+
+
+def _rolled_contact_problems(hand: HandKinematics, ref: BodyRef, after: GraspState, body: str, y: Array,
+                             n: Array, r: float, tag: str, i: int) -> list[str]:
+    """The state after a rolling step has a contact on ``body`` at the rolled point ``y`` (3,) with
+    the normal ``n`` (3,): of that body's contacts the nearest one (a cylinder has two on the
+    table), its body point, world point and ``r`` times its normal each within :data:`ROLL_TOL`."""
+    errs = [max(float(np.linalg.norm(hand.point_position(ref, after.contacts[j].point_body, after.q) - y)),
+                float(np.linalg.norm(after.world_point(j) - y)),
+                r * float(np.linalg.norm(after.world_normal(j) - n)))
+            for j, name in enumerate(after.bodies()) if name == body]
+    if not errs:
+        return [f"{tag}: rolling contact {i} ({body}) is missing after the step"]
+    if min(errs) > ROLL_TOL:
+        return [f"{tag}: the state after the step does not have contact {i} ({body}) where it rolled "
+                f"(off by {min(errs):.3g})"]
+    return []
 
 
 def _link_rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
@@ -580,15 +586,7 @@ def _link_rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, t
                        f"the link and {chk.travel_object:.6g} on the sphere")
         _, u, _ = link_contact(hand, ref, r, after.q, after.position)
         y = after.position - r * u  # (3,) the rolled contact
-        errs = [max(float(np.linalg.norm(hand.point_position(ref, after.contacts[j].point_body, after.q) - y)),
-                    float(np.linalg.norm(after.world_point(j) - y)),
-                    r * float(np.linalg.norm(after.world_normal(j) - u)))
-                for j, name in enumerate(after.bodies()) if name == c.body]
-        if not errs:
-            out.append(f"{tag}: rolling contact {i} ({c.body}) is missing after the step")
-        elif min(errs) > ROLL_TOL:
-            out.append(f"{tag}: the state after the step does not have contact {i} ({c.body}) where it rolled "
-                       f"(off by {min(errs):.3g})")
+        out.extend(_rolled_contact_problems(hand, ref, after, c.body, y, u, r, tag, i))
     return out
 
 

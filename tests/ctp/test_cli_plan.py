@@ -146,10 +146,9 @@ def test_hold_rate_default_is_the_replays_and_bad_rates_exit_2(tmp_path) -> None
         assert r.exit_code == 2 and "hold-rate" in r.output and "Traceback" not in r.output, (bad, r.output)
 
 
-@pytest.mark.parametrize("name", ["link_replacement", "contact_slides", "link_sliding", "separate_finger_contacts"])
-def test_ctp_plan_switch_flags_reach_the_planner(monkeypatch, name: str) -> None:  # type: ignore[no-untyped-def]
-    """``--link-replacement``, ``--contact-slides``, ``--link-sliding`` and
-    ``--separate-finger-contacts`` each turn on their ``PlannerOptions`` switch (off without it)."""
+def _spy_planner_options(monkeypatch):  # type: ignore[no-untyped-def]
+    """Replace ``planner.plan`` by a one-expansion run that records the ``PlannerOptions`` each
+    call receives (the list returned)."""
     import planner
     from planner.options import PlannerOptions
 
@@ -161,6 +160,14 @@ def test_ctp_plan_switch_flags_reach_the_planner(monkeypatch, name: str) -> None
         return real(*args, options=options, max_expansions=1, **kwargs)
 
     monkeypatch.setattr(planner, "plan", spy)
+    return seen
+
+
+@pytest.mark.parametrize("name", ["link_replacement", "contact_slides", "link_sliding", "separate_finger_contacts"])
+def test_ctp_plan_switch_flags_reach_the_planner(monkeypatch, name: str) -> None:  # type: ignore[no-untyped-def]
+    """``--link-replacement``, ``--contact-slides``, ``--link-sliding`` and
+    ``--separate-finger-contacts`` each turn on their ``PlannerOptions`` switch (off without it)."""
+    seen = _spy_planner_options(monkeypatch)
     scene = str(Path(__file__).resolve().parents[2] / "examples" / "planar_disk_envelope.json")
     for flag, want in (([], False), (["--" + name.replace("_", "-")], True)):
         r = CliRunner().invoke(app, ["plan", scene, "--goal", "active", *flag])
@@ -171,17 +178,9 @@ def test_ctp_plan_switch_flags_reach_the_planner(monkeypatch, name: str) -> None
 def test_ctp_plan_effort_weight_reaches_the_planner(monkeypatch) -> None:  # type: ignore[no-untyped-def]
     """``--effort-weight W`` sets ``PlannerOptions.effort_weight`` (without it: the default 0.1)
     and nothing else of the options."""
-    import planner
     from planner.options import PlannerOptions
 
-    seen: list[PlannerOptions | None] = []
-    real = planner.plan
-
-    def spy(*args, options=None, **kwargs):  # type: ignore[no-untyped-def]
-        seen.append(options)
-        return real(*args, options=options, max_expansions=1, **kwargs)
-
-    monkeypatch.setattr(planner, "plan", spy)
+    seen = _spy_planner_options(monkeypatch)
     scene = str(Path(__file__).resolve().parents[2] / "examples" / "planar_disk_envelope.json")
     for flag, want in (([], PlannerOptions().effort_weight), (["--effort-weight", "0"], 0.0),
                        (["--effort-weight", "2.5"], 2.5)):
