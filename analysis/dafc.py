@@ -22,6 +22,7 @@ reports ``exact = False``.
 
 from __future__ import annotations
 
+import functools
 import heapq
 import math
 import weakref
@@ -1114,6 +1115,20 @@ def sector_rows(sec: Sector, d: int, margin: float) -> tuple[Array, Array]:
     return np.array(rows), np.array(rhs)
 
 
+@functools.cache
+def _free_dirs(d: int) -> Array:
+    """Outward normals ``(k, d-1)`` (tangent coordinates) of the sides of the polygon that
+    circumscribes a free S-point's friction disc in :func:`_relaxed_box_model`: the two signs in
+    2-D, :data:`SECTOR_FREE_SIDES` directions in 3-D (read-only)."""
+    if d == 2:
+        out = np.array([[1.0], [-1.0]])
+    else:
+        ang = 2 * np.pi * np.arange(SECTOR_FREE_SIDES) / SECTOR_FREE_SIDES
+        out = np.array([unit_angle(t, 3) for t in ang])
+    out.setflags(write=False)
+    return out
+
+
 def _relaxed_box_model(oracle: DAFCOracle, fixed_G: Array, dep: list[int], box: tuple[Sector, ...]
                        ) -> tuple[LPModel, Array, list[tuple[int, ...]]]:
     """The LP of :func:`_relaxed_box_lp` for the sector ``box``: (model, ``G`` ``(D, n)``, the
@@ -1130,8 +1145,10 @@ def _relaxed_box_model(oracle: DAFCOracle, fixed_G: Array, dep: list[int], box: 
     sy, sel, st, fs = oracle.system, oracle.sel, oracle.st, oracle.fs
     d, L_c = sy.d, st.G_c.shape[1]
     cols: list[Array] = []  # (D,) per friction unknown
-    rows: list[tuple[dict[int, float], float]] = []  # sparse rows over [f_c; t] <= rhs
+    # rows over [f_c; t] <= 0: (their non-zero columns, their values (k, #columns)), in row order
+    rows: list[tuple[list[int], Array]] = []
     slots: list[tuple[int, ...]] = []
+    free_dirs = _free_dirs(d)  # (k, d-1) outward normals of the circumscribed polygon's sides
     for k, sec in zip(dep, box, strict=True):
         i = sel.s_index[k]
         T = sy.tangents[i]  # (d-1, d)
@@ -1140,13 +1157,13 @@ def _relaxed_box_model(oracle: DAFCOracle, fixed_G: Array, dep: list[int], box: 
         first = L_c + len(cols)
         h = sector_half(sec)
         if sec is None:
-            ang = 2 * np.pi * np.arange(SECTOR_FREE_SIDES) / SECTOR_FREE_SIDES
-            dirs = [np.array([1.0]), np.array([-1.0])] if d == 2 else [unit_angle(t, 3) for t in ang]
             r_mu = mu if d == 2 else mu / np.cos(np.pi / SECTOR_FREE_SIDES)
             for j in range(d - 1):
                 cols.append(sy.G_blocks[i] @ T[j])
-            for c in dirs:
-                rows.append(({first + j: float(c[j]) for j in range(d - 1)} | {n_col: -r_mu}, 0.0))
+            vals = np.empty((free_dirs.shape[0], d))
+            vals[:, : d - 1] = free_dirs
+            vals[:, d - 1] = -r_mu
+            rows.append(([*range(first, first + d - 1), n_col], vals))
             slots.append(tuple(range(first, first + d - 1)))
         elif h <= 0.0:
             e = T.T @ unit_angle(sec[0], d)  # (d,) world slip direction
@@ -1156,21 +1173,21 @@ def _relaxed_box_model(oracle: DAFCOracle, fixed_G: Array, dep: list[int], box: 
         else:
             for th in sec:
                 cols.append(-(sy.G_blocks[i] @ (T.T @ unit_angle(th, d))))
-            rows.append(({first: -1.0, first + 1: -1.0, n_col: mu}, 0.0))
-            rows.append(({first: 1.0, first + 1: 1.0, n_col: -mu / np.cos(h)}, 0.0))
+            rows.append(([first, first + 1, n_col], np.array([[-1.0, -1.0, mu], [1.0, 1.0, -mu / np.cos(h)]])))
             slots.append((first, first + 1))
     n_t = len(cols)
     n = L_c + n_t
     G = np.hstack([fixed_G, np.array(cols).T.reshape(sy.D, n_t)])  # (D, n)
-    A_ub = np.zeros((fs.C.shape[0] + 1 + len(rows), n))
-    A_ub[: fs.C.shape[0], :L_c] = fs.C
-    A_ub[fs.C.shape[0], :L_c] = fs.N.sum(axis=0)
+    m_C = fs.C.shape[0]
+    A_ub = np.zeros((m_C + 1 + sum(v.shape[0] for _, v in rows), n))
+    A_ub[:m_C, :L_c] = fs.C
+    A_ub[m_C, :L_c] = fs.N.sum(axis=0)
     b_ub = np.zeros(A_ub.shape[0])
-    b_ub[fs.C.shape[0]] = GRIP_BOUND
-    for r, (entries, rhs) in enumerate(rows):
-        for j, v in entries.items():
-            A_ub[fs.C.shape[0] + 1 + r, j] = v
-        b_ub[fs.C.shape[0] + 1 + r] = rhs
+    b_ub[m_C] = GRIP_BOUND
+    r = m_C + 1
+    for where, vals in rows:
+        A_ub[r : r + vals.shape[0], where] = vals
+        r += vals.shape[0]
     lb = np.r_[np.full(L_c, -np.inf), [0.0 if sector_half(sec) < np.pi else -np.inf
                                          for sec, sl in zip(box, slots, strict=True) for _ in sl]]
     model = LPModel(n, A_ub=A_ub, b_ub=b_ub, A_eq=snap(oracle.Xi.T @ G),
@@ -1297,7 +1314,7 @@ def _relaxed_box_lp(oracle: DAFCOracle, dr: Array, fixed_G: Array, dep: list[int
     for sec, sl in zip(box, slots, strict=True):
         if sec is None:
             t = x[list(sl)]  # friction in tangent coordinates; the slip opposes it
-            targets.append(-t if np.linalg.norm(t) > 1e-12 else np.zeros(d - 1))
+            targets.append(-t if _norm(t) > 1e-12 else np.zeros(d - 1))
         elif not sl:
             targets.append(unit_angle(sec[0], d))
         else:
@@ -1318,7 +1335,7 @@ def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector,
     cold start, so the last bits of the point may differ; test_solvers checks it)."""
     ms, sy, sel = oracle.ms, oracle.system, oracle.sel
     a_bar, nr, d = ms.a_bar, ms.n_redundant, sy.d
-    scale = max(1.0, float(np.linalg.norm(ms.Lambda_q_t @ u)))
+    scale = max(1.0, _norm(ms.Lambda_q_t @ u))
     zmax = SECTOR_ZMAX * scale
     margin = 2.0 * SLIP_TOL * (1.0 + zmax * np.sqrt(nr))
     k_dev = (d - 1) * len(dep)
@@ -1350,7 +1367,7 @@ def _box_motion(oracle: DAFCOracle, u: Array, dep: list[int], box: tuple[Sector,
         for rr, v in zip(R, rhs, strict=True):
             row(-(rr @ S_z))
             b.append(float(rr @ S_0 - v))
-        gn = float(np.linalg.norm(g))
+        gn = _norm(g)
         goal = scale * g / gn if gn > 1e-12 else np.zeros(d - 1)
         for j in range(d - 1):
             row(S_z[j], q * (d - 1) + j, -1.0)
@@ -1535,7 +1552,7 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
         store: dict[str, object] = {}  # the box's relaxed LP and motion LP, built once for all its directions
         try:
             for j, u in enumerate(U):
-                dr = ms.Lambda_r_t @ (u / np.linalg.norm(u))
+                dr = ms.Lambda_r_t @ (u / _norm(u))
                 ub, tg = _relaxed_box_lp(oracle, dr, G0, list(range(nS)), box, store)
                 bounds[j] = ub - sy.scales.work_tol(dr)
                 targets.append(tg)
@@ -1547,12 +1564,12 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
             continue  # no relaxed force does positive work along any generator: no member here
         centre = Z.sum(axis=0)
         order = [int(j) for j in np.argsort(-bounds)[:3] if bounds[j] > 0.0]
-        cands = [centre] + [Z[j] + 0.01 * centre / max(1e-12, float(np.linalg.norm(centre))) for j in order]
+        cands = [centre] + [Z[j] + 0.01 * centre / max(1e-12, _norm(centre)) for j in order]
         if ms.n_redundant:
             # the best generator's direction with the redundancy whose slips come closest to the
             # relaxed maximiser's friction directions
             j = order[0]
-            u_j = U[j] / np.linalg.norm(U[j])
+            u_j = U[j] / _norm(U[j])
             z = _box_motion(oracle, u_j, list(range(nS)), box, targets[j], store)
             if z is not None:
                 cands.append(np.r_[u_j, z])
@@ -1561,16 +1578,16 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
                 # as a fixed-body point's on the line of object motions it does not move along):
                 # the same friction targets a step inside the cone, where the points slide. The
                 # wrap's FFDSDDDDS family has members that only this candidate finds
-                u_in = U[j] + 0.01 * centre[:a_bar] / max(1e-12, float(np.linalg.norm(centre)))
-                if float(np.linalg.norm(u_in)) > 1e-9:
-                    u_in = u_in / np.linalg.norm(u_in)
+                u_in = U[j] + 0.01 * centre[:a_bar] / max(1e-12, _norm(centre))
+                if _norm(u_in) > 1e-9:
+                    u_in = u_in / _norm(u_in)
                     z = _box_motion(oracle, u_in, list(range(nS)), box, targets[j], store)
                     if z is not None:
                         cands.append(np.r_[u_in, z])
             # and the same at the centroid's object direction
             u_c = centre[:a_bar]
-            if a_bar > 1 and float(np.linalg.norm(u_c)) > 1e-9:
-                u_c = u_c / np.linalg.norm(u_c)
+            if a_bar > 1 and _norm(u_c) > 1e-9:
+                u_c = u_c / _norm(u_c)
                 try:
                     _, tg = _relaxed_box_lp(oracle, ms.Lambda_r_t @ u_c, G0, list(range(nS)), box, store)
                 except SolverError:
@@ -1579,7 +1596,7 @@ def slip_sector_search(oracle: DAFCOracle, budget: int = SECTOR_BUDGET) -> Secto
                 if z is not None:
                     cands.append(np.r_[u_c, z])
         for zc in cands:
-            nu = float(np.linalg.norm(zc[:a_bar]))
+            nu = _norm(zc[:a_bar])
             if nu <= 1e-9:
                 continue
             # in 3-D a candidate's force LP rows (its exact slips) recur for no later direction:
