@@ -31,6 +31,7 @@ D-point strictly.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -60,6 +61,13 @@ ZERO_ROW = 1e-12
 #: Rows per batch of :meth:`FamilyKinematics.separates` (batched SVDs).
 CHUNK = 4096
 
+
+
+def _norm(v: Array) -> float:
+    """``float(np.linalg.norm(v))`` of a real vector, computed as it does (``sqrt(x . x)`` of the
+    raveled ``x``, a copy when ``v`` is strided), without its overhead: the same bits."""
+    x = v.ravel(order="K")
+    return math.sqrt(float(x.dot(x)))
 
 @dataclass(frozen=True)
 class MemberCertificate:
@@ -103,7 +111,7 @@ class MemberCertificate:
         zero = system.scales.zero_force
         out = []
         for i, s in enumerate(self.source):
-            load = float(np.linalg.norm(self.forces[i])) if s == "F" else abs(float(self.f_c[i]))
+            load = _norm(self.forces[i]) if s == "F" else abs(float(self.f_c[i]))
             if s != "D" and load <= zero:
                 out.append(i)
         return out
@@ -141,7 +149,7 @@ class MemberCertificate:
         sy, sc = kin.system, kin.system.scales
         L, M = sy.L, sy.M
         v = self.motion
-        size = float(np.linalg.norm(v))
+        size = _norm(v)
         F0 = sc.force
         zero = sc.zero_force
         rel_all = kin.A @ v  # (L, d) finger point minus object point velocity, per contact
@@ -157,18 +165,18 @@ class MemberCertificate:
             n, G = sy.normals[i], sy.G_blocks[i]
             along = float(n @ rel)
             if s0 == "F":
-                kept_ok[i] = (float(np.linalg.norm(rel)) <= MOTION_TOL * size
+                kept_ok[i] = (_norm(rel) <= MOTION_TOL * size
                               and float(np.max(kin.facets[i] @ self.forces[i])) <= FORCE_TOL * F0)
                 W[i] = G @ self.forces[i]
                 grip[i] = float(snap(n) @ self.forces[i])
-                free_ok[i] = float(np.linalg.norm(self.forces[i])) <= zero
+                free_ok[i] = _norm(self.forces[i]) <= zero
                 eq_rows.extend(A_i)
                 eq_owner.extend([i] * len(A_i))
             elif s0 in "SN":
                 n_f = float(self.f_c[i])
                 kept_ok[i] = abs(along) <= MOTION_TOL * size and n_f >= -FORCE_TOL * F0
                 if s0 == "S":
-                    kept_ok[i] &= float(np.linalg.norm(rel)) > SLIP_TOL * size
+                    kept_ok[i] &= _norm(rel) > SLIP_TOL * size
                 W[i] = n_f * (G @ (n - (sy.mu[i] * self.slips[i] if s0 == "S" else 0.0)))
                 grip[i] = n_f
                 free_ok[i] = abs(n_f) <= zero
@@ -384,7 +392,7 @@ class FamilyKinematics:
         if not d_pts:
             return motion
         rows = self.normal_rows[d_pts]  # (#D, M + D)
-        size = float(np.linalg.norm(motion))
+        size = _norm(motion)
         stuck = {i for i, val in zip(d_pts, rows @ motion, strict=True) if val >= -STRICT_TOL * size}
         if not stuck:
             return motion
@@ -437,12 +445,12 @@ def _unit_push(R: Array) -> Array | None:
 
 def _strict(rows: Array, motion: Array, delta: Array) -> Array | None:
     """``motion + t delta`` (a few step sizes) whose every row value is strictly negative."""
-    size, nd = float(np.linalg.norm(motion)), float(np.linalg.norm(delta))
+    size, nd = _norm(motion), _norm(delta)
     if nd == 0.0:
         return motion if bool(np.all(rows @ motion < -STRICT_TOL * size)) else None
     for t in (1e-3, 1e-2, 1e-1, 1.0):
         v2 = motion + t * size * delta / nd
-        if bool(np.all(rows @ v2 < -STRICT_TOL * float(np.linalg.norm(v2)))):
+        if bool(np.all(rows @ v2 < -STRICT_TOL * _norm(v2))):
             return v2
     return None
 
@@ -512,7 +520,7 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
     normal_of: list[dict[int, int]] = []  # per pair: the unknown of each S/N-point
     for b, (comb, v) in enumerate(pairs):
         rel = kin.A @ v  # (L, d) finger point minus object point velocity
-        size = float(np.linalg.norm(v))
+        size = _norm(v)
         Fc: list[Array] = []  # contact forces (k_j, L, d) of the unknowns, contact by contact
         n_unknowns = 0
         own: dict[int, int] = {}
@@ -520,7 +528,7 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
             n_j = sy.normals[j]
             along = float(n_j @ rel[j])
             if s == "F":
-                ok[b] &= float(np.linalg.norm(rel[j])) <= MOTION_TOL * size
+                ok[b] &= _norm(rel[j]) <= MOTION_TOL * size
                 Fc.append(gen_cols[j])
                 n_unknowns += gen_cols[j].shape[0]
             elif s in "SN":
@@ -528,8 +536,8 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
                 t = np.zeros(d)
                 if s == "S":
                     slip = -rel[j]  # the object point relative to the finger
-                    ok[b] &= float(np.linalg.norm(slip)) > SLIP_TOL * size
-                    t = -sy.mu[j] * slip / max(1e-300, float(np.linalg.norm(slip)))
+                    ok[b] &= _norm(slip) > SLIP_TOL * size
+                    t = -sy.mu[j] * slip / max(1e-300, _norm(slip))
                 col = np.zeros((1, L, d))
                 col[0, j] = n_j + t
                 Fc.append(col)
@@ -610,7 +618,7 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
             elif s in "SN":
                 f_c[j] = float(lam[normal_of[b][j]]) * F0
                 if s == "S":
-                    slips[j] = -rel[j] / float(np.linalg.norm(rel[j]))
+                    slips[j] = -rel[j] / _norm(rel[j])
         out[b] = MemberCertificate(comb, dr.copy(), v, f_c, f_F, slips, V2[b, :a_bar[b], :].T.copy(),
                                    Vt[b, rank[b]:, :].T.copy())
     return out
@@ -633,7 +641,7 @@ def probe_motions(kin: FamilyKinematics, combinations: list[str]) -> list[list[A
     code = {"F": 0, "S": 1, "N": 1, "D": 2}
     letters = np.array([[code[s] for s in c] for c in combinations], dtype=np.intp)  # (B, L)
     Vt, rank = _padded_null_spaces(kin.A, kin.normal_rows, letters, d, n)  # (B, n, n), (B,)
-    w = sy.w_ex / max(float(np.linalg.norm(sy.w_ex)), 1e-300)
+    w = sy.w_ex / max(_norm(sy.w_ex), 1e-300)
     out: list[list[Array]] = []
     for b, c in enumerate(combinations):
         Lam = Vt[b, rank[b]:, :].T  # (n, a)
@@ -651,7 +659,7 @@ def probe_motions(kin: FamilyKinematics, combinations: list[str]) -> list[list[A
         live = np.linalg.norm(Rd, axis=1) > 1e3 * NULL_ROW_TOL if Rd.size else np.zeros(0, dtype=bool)
         for t in targets:
             dr = basis @ (basis.T @ t)
-            nd = float(np.linalg.norm(dr))
+            nd = _norm(dr)
             if nd < 1e-9:
                 continue
             dr = dr / nd
@@ -662,7 +670,7 @@ def probe_motions(kin: FamilyKinematics, combinations: list[str]) -> list[list[A
             for i in s_idx:
                 vo = sy.G_blocks[i].T @ dr
                 vt = vo - (vo @ sy.normals[i]) * sy.normals[i]
-                S_goal.append(-vt / max(float(np.linalg.norm(vt)), 1e-9))
+                S_goal.append(-vt / max(_norm(vt), 1e-9))
             variants = [True, False] if s_idx else [False]
             for aligned in variants:
                 A = [WEIGHT * obj, Rd[live]]
@@ -673,13 +681,13 @@ def probe_motions(kin: FamilyKinematics, combinations: list[str]) -> list[list[A
                 y = np.linalg.lstsq(np.vstack(A), np.concatenate(rhs), rcond=RANK_RTOL)[0]
                 v = Lam @ y
                 v = v - Lam @ np.linalg.lstsq(obj, v[M:] - dr, rcond=RANK_RTOL)[0]  # object part exactly dr
-                if float(np.linalg.norm(v[M:] - dr)) > 1e-9:
+                if _norm(v[M:] - dr) > 1e-9:
                     continue
                 rel = kin.A @ v  # (L, d)
-                size = float(np.linalg.norm(v))
+                size = _norm(v)
                 if any(float(kin.normal_rows[i] @ v) > ALLOW_TOL for i in d_idx):
                     continue
-                if any(float(np.linalg.norm(rel[i])) <= SLIP_TOL * size for i in s_idx):
+                if any(_norm(rel[i]) <= SLIP_TOL * size for i in s_idx):
                     continue
                 found.append(v)
         out.append(found)
