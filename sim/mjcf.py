@@ -409,14 +409,15 @@ def _link_geoms(finger: str, k: int, lk: _LinkSpec, eps: float, assets: list[str
 LINE_PARALLEL_TOL = 1e-6
 
 
-def _line_contact_feet(scene: Scene, hand: HandKinematics, lk: _LinkSpec) -> list[Array] | None:
+def _line_contact_feet(scene: Scene, hand: HandKinematics, lk: _LinkSpec, eps: float) -> list[Array] | None:
     """A capsule link lying along a cylinder object (axes parallel, :data:`LINE_PARALLEL_TOL`) with
     two or more scene contacts at distinct points (its line contact's ends, the cylinder rolling on
     it, :mod:`planner.link_roll`): the feet ``(3,)`` of those contacts on the link's axis (this
     body's frame). MuJoCo collides a capsule with a cylinder at one point (an end of the line, not
     along it), so such a link touches the object through spheres of its capsule's radius at the
-    feet: the capsule's own surface in those cross-sections, where the line contact's ends stay
-    while it rolls about the common axis. None for any other link."""
+    feet, each moved inwards along the line by that radius (off the rim's edge): the capsule's own
+    surface in those cross-sections, which stay on the line contact while it rolls about the
+    common axis. None for any other link."""
     if not isinstance(scene.object.shape, Cylinder) or lk.shapes is not None or not lk.radius > 0.0:
         return None
     ref = hand.resolve_body(lk.name)
@@ -436,7 +437,15 @@ def _line_contact_feet(scene: Scene, hand: HandKinematics, lk: _LinkSpec) -> lis
         foot = lk.seg_a + t * e
         if all(np.linalg.norm(foot - f) > 1e-9 for f in feet):
             feet.append(foot)
-    return feet if len(feet) >= 2 else None
+    if len(feet) < 2:
+        return None
+    # the line's ends are the cylinder's rims: a sphere there would touch the rim's edge, whose normal
+    # MuJoCo takes as it may; moved inwards along the line by the sphere's radius it touches the side
+    mid = np.mean(feet, axis=0)
+    inward = [mid - f for f in feet]
+    shift = lk.radius + eps
+    return [f + min(shift, 0.45 * float(np.linalg.norm(v))) * v / float(np.linalg.norm(v))
+            for f, v in zip(feet, inward, strict=True)]
 
 
 def _object_geom(scene: Scene, eps: float, s: float, assets: list[str]) -> str:
@@ -566,7 +575,7 @@ def build_mjcf(scene: Scene, params: SimulationParams = DEFAULT_PARAMS, tau: Arr
             lk = links[k]
             a_name, b_name = link_site_names(fm.name, k)
             geoms = _link_geoms(fm.name, k, lk, eps, assets)
-            feet = _line_contact_feet(scene, hand, lk)
+            feet = _line_contact_feet(scene, hand, lk, eps)
             unpaired: set[str] = set()
             if feet is not None:  # the capsule (no pair) and a sphere at each end of the line contact
                 unpaired.add(geoms[0][1])
