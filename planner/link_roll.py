@@ -203,7 +203,7 @@ class LinkRollingMotion:
             P = axis_point(pose, z)
             _, u, _ = link_contact(self.hand, ref, self.radius, q, P)
             c = P - self.radius * u
-            arm = c - pose.position  # (3,) z a - r u
+            arm = z * pose.rotation[:, 2] - self.radius * u  # (3,) c - p
             r = slice(3 * k, 3 * k + 3)
             rows[r, : self.M] = -self.hand.point_jacobian(ref, c, q)
             rows[r, self.M: self.M + 3] = np.eye(3)
