@@ -1,4 +1,5 @@
-"""A 3-D sphere rolling on the side of a moving finger link (issue 11 item 1), to every order.
+"""A 3-D sphere, or a cylinder along the link, rolling on the side of a moving finger link (issue 11
+item 1), to every order.
 
 A sticking contact of a sphere (radius ``r``) on the side of a capsule link (radius ``rho``, axis
 ``a(q) -> b(q)``) does not keep its material points together in a finite motion: the sphere rolls
@@ -30,6 +31,18 @@ integration's accuracy, ``O(h^2)`` summed over the path. :func:`link_roll_check`
 from its states alone: the gap per state, the slip between consecutive states (the relative
 motion of the sphere in the link's frame, ``dc + omega_rel x (-r u_mid)``, summed) and the two
 travels of the contact point (along the link's surface and on the sphere), equal when it rolls.
+
+A cylinder (radius ``r``, axis ``a = R e_z``) lying along a capsule link, the axes parallel, touches
+it along a line, given by the scene as two contacts at its ends (axial coordinates ``z_k``, object
+frame, as on a table). Each is the sphere's contact with the centre replaced by the point
+``P_k = p + z_k a`` of the cylinder's axis: gap ``|P_k - y_k| - rho - r`` (``y_k`` its foot on the
+link's axis), contact ``c_k = P_k - r u_k``, no-slip rows ``p' + omega x (z_k a - r u_k) - J_L(c_k)
+q' = 0``, i.e. ``[-J_L(c_k), I, -[z_k a - r u_k]x J_l(w)]``. Two points without relative velocity
+leave the relative twist a turn about the line through them, the common axis direction: the
+cylinder rolls on the link and stays parallel to it (:attr:`LinkRollCheck.axis_angle` measures
+it). A cylinder whose axis is not parallel to the link's touches it at a point whose relative
+motion is not a roll about the common axis; those contacts keep their glued points, as does a
+single contact of a cylinder on a link (a line contact needs its two ends).
 """
 
 from __future__ import annotations
@@ -45,7 +58,7 @@ from analysis.geometry import link_shapes
 from analysis.kinematics import BodyRef, HandKinematics
 from analysis.pose import Pose
 from analysis.rotations import matrix_to_rotvec, skew
-from analysis.scene import Scene, Sphere
+from analysis.scene import Cylinder, Scene, Sphere
 from planner.manifold import PROJECTION_RCOND, ContactManifold, _left_jacobian_so3
 from planner.state import GraspState
 
@@ -54,16 +67,42 @@ from planner.state import GraspState
 SIDE_MARGIN = 1e-6
 #: scene units: the largest summed slip of a rolling link contact along an integrated path
 LINK_ROLL_SLIP_TOL = 1e-6
+#: the largest sine of the angle between a cylinder's axis and a capsule link's axis for their line
+#: contact to roll (a larger angle: the contacts keep their glued points)
+PARALLEL_TOL = 1e-6
+
+
+def object_radius(scene: Scene) -> float:
+    """The radius ``r`` of a sphere or cylinder object (0 for any other shape)."""
+    shape = scene.object.shape
+    return float(shape.radius) if isinstance(shape, Sphere | Cylinder) else 0.0
+
+
+def axial_offset(scene: Scene, state: GraspState, i: int) -> float:
+    """The axial coordinate ``z_k`` (object frame) of contact ``i`` of a cylinder (0 for a sphere):
+    where along the line contact it lies; it keeps it while it rolls about the common axis."""
+    return float(state.contacts[i].point_object[2]) if isinstance(scene.object.shape, Cylinder) else 0.0
+
+
+def axis_point(pose: Pose, offset: float) -> Array:
+    """``P = p + z a`` ``(3,)``: the point at axial coordinate ``offset`` of the object's axis (its
+    centre for a sphere, ``offset = 0``)."""
+    return pose.position + offset * pose.rotation[:, 2]
 
 
 def link_rolls(hand: HandKinematics, scene: Scene, state: GraspState, sticking: Sequence[int]) -> tuple[int, ...]:
     """The sticking contacts of a 3-D sphere object on the side of a capsule finger link of positive
     radius (the foot of the centre on the link's axis strictly inside it, :data:`SIDE_MARGIN`):
-    these roll. Links of radius 0 (lines: the bundled palm and wrap fingers), links with URDF
-    collision shapes (not capsules) and fixed bodies are left out: they keep their glued points."""
-    if scene.dim != 3 or not isinstance(scene.object.shape, Sphere):
+    these roll. For a cylinder object, the contacts on the side of a capsule link whose axis is
+    parallel to the cylinder's (:data:`PARALLEL_TOL`), the foot of ``P_k = p + z_k a`` inside the
+    link, where the link has two of them at distinct axial coordinates (the ends of the line
+    contact). Links of radius 0 (lines: the bundled palm and wrap fingers), links with URDF
+    collision shapes (not capsules), fixed bodies and cylinders across a link are left out: they
+    keep their glued points."""
+    shape = scene.object.shape
+    if scene.dim != 3 or not isinstance(shape, Sphere | Cylinder):
         return ()
-    out = []
+    out: list[int] = []
     for i in sticking:
         ref = hand.resolve_body(state.contacts[i].body)
         if (ref is None or ref.finger is None or link_shapes(hand, ref, state.q) is not None
@@ -71,14 +110,24 @@ def link_rolls(hand: HandKinematics, scene: Scene, state: GraspState, sticking: 
             continue
         a, b = hand.body_segment(ref, state.q)
         e = b - a
-        t = float((state.pose.position - a) @ e / max(float(e @ e), 1e-300))
+        if isinstance(shape, Cylinder):
+            axis = state.pose.rotation[:, 2]
+            if float(np.linalg.norm(np.cross(axis, e))) > PARALLEL_TOL * float(np.linalg.norm(e)):
+                continue
+        P = axis_point(state.pose, axial_offset(scene, state, i))
+        t = float((P - a) @ e / max(float(e @ e), 1e-300))
         if SIDE_MARGIN < t < 1 - SIDE_MARGIN:
             out.append(i)
+    if isinstance(shape, Cylinder):  # a line contact: two ends on the same link
+        def ends(i: int) -> list[float]:
+            return [axial_offset(scene, state, j) for j in out if state.contacts[j].body == state.contacts[i].body]
+        out = [i for i in out if max(ends(i)) - min(ends(i)) > SIDE_MARGIN * float(shape.height)]
     return tuple(out)
 
 
 def link_contact(hand: HandKinematics, ref: BodyRef, radius: float, q: Array, p: Array) -> tuple[float, Array, Array]:
-    """The sphere of ``radius`` centred at ``p`` ``(3,)`` against the capsule link ``ref`` at ``q``:
+    """The sphere of ``radius`` centred at ``p`` ``(3,)`` (or the cylinder's cross-section about its
+    axis point ``P_k``) against the capsule link ``ref`` at ``q``:
     ``(gap, u, y)``: ``|p - y| - rho - r``, the unit normal ``u`` ``(3,)`` from the link into the
     sphere and the foot ``y`` ``(3,)`` of the centre on the link's axis."""
     a, b = hand.body_segment(ref, q)
@@ -110,6 +159,7 @@ class LinkRollCheck:
     travel_link: float  # summed displacement of the contact point on the link's surface (link frame)
     travel_object: float  # summed displacement of the contact point on the sphere (object frame)
     turn: float  # summed relative turn |omega_rel| of the sphere against the link
+    axis_angle: float = 0.0  # a cylinder: the largest sine of the angle between its axis and the link's
 
 
 class LinkRollingMotion:
@@ -126,7 +176,8 @@ class LinkRollingMotion:
             ref = hand.resolve_body(state.contacts[i].body)
             assert ref is not None
             self.refs.append(ref)
-        self.radius = float(scene.object.shape.radius) if isinstance(scene.object.shape, Sphere) else 0.0
+        self.radius = object_radius(scene)
+        self.offsets = [axial_offset(scene, state, i) for i in self.rolls]  # z_k (0 for a sphere)
         self.base = base
         self.M, self.D = hand.M, self.base.D
 
@@ -136,23 +187,27 @@ class LinkRollingMotion:
     def holonomic(self, x: Array) -> Array:
         """``H(x)``: the other contacts' rows and the direction rows (:class:`ContactManifold`), then
         each rolling contact's gap."""
-        p = self.pose(x[self.M:]).position
-        gaps = [link_contact(self.hand, ref, self.radius, x[: self.M], p)[0] for ref in self.refs]
+        pose = self.pose(x[self.M:])
+        gaps = [link_contact(self.hand, ref, self.radius, x[: self.M], axis_point(pose, z))[0]
+                for ref, z in zip(self.refs, self.offsets, strict=True)]
         return np.concatenate([self.base.function(x), gaps])
 
     def no_slip(self, x: Array) -> Array:
-        """The rolling contacts' velocity rows ``(3 k, M + 6)``: ``[-J_L(c), I, r [u]x J_l(w)]``."""
+        """The rolling contacts' velocity rows ``(3 k, M + 6)``: ``[-J_L(c), I, -[z a - r u]x J_l(w)]``
+        (``z = 0`` for a sphere: ``r [u]x J_l(w)``)."""
         q, s = x[: self.M], x[self.M:]
-        p = self.pose(s).position
+        pose = self.pose(s)
         Jl = _left_jacobian_so3(s[3:])
         rows = np.zeros((3 * len(self.refs), self.M + self.D))
-        for k, ref in enumerate(self.refs):
-            _, u, _ = link_contact(self.hand, ref, self.radius, q, p)
-            c = p - self.radius * u
+        for k, (ref, z) in enumerate(zip(self.refs, self.offsets, strict=True)):
+            P = axis_point(pose, z)
+            _, u, _ = link_contact(self.hand, ref, self.radius, q, P)
+            c = P - self.radius * u
+            arm = z * pose.rotation[:, 2] - self.radius * u  # (3,) c - p
             r = slice(3 * k, 3 * k + 3)
             rows[r, : self.M] = -self.hand.point_jacobian(ref, c, q)
             rows[r, self.M: self.M + 3] = np.eye(3)
-            rows[r, self.M + 3:] = self.radius * skew(u) @ Jl
+            rows[r, self.M + 3:] = -skew(arm) @ Jl
         return rows
 
     def velocity(self, x: Array, prefer: Array, dr: Array) -> Array:
@@ -172,8 +227,9 @@ class LinkRollingMotion:
         M = self.M
         for _ in range(iters):
             F = self.base.function(x)
-            q, p = x[:M], self.pose(x[M:]).position
-            geo = [link_contact(self.hand, ref, self.radius, q, p) for ref in self.refs]
+            q, pose = x[:M], self.pose(x[M:])
+            geo = [link_contact(self.hand, ref, self.radius, q, axis_point(pose, z))
+                   for ref, z in zip(self.refs, self.offsets, strict=True)]
             res = float(np.linalg.norm(np.concatenate([F, [g for g, _, _ in geo]])))
             if res <= tolerance:
                 break
@@ -200,12 +256,23 @@ class LinkRollingMotion:
             worst = max(worst, res)
             X.append(x.copy())
         Xa = np.array(X)  # (steps + 1, M + 6)
-        slip = max((link_roll_check(self.hand, ref, self.radius, Xa, self.state.pose).slip for ref in self.refs),
-                   default=0.0)
+        slip = max((chk.slip for chk in self.checks(Xa)), default=0.0)
         poses = np.array([self.pose(xx[self.M:]).vector() for xx in Xa])
         return LinkRollPath(Xa, poses, self.rolls, worst, slip)
 
-def link_roll_check(hand: HandKinematics, ref: BodyRef, radius: float, X: Array, start: Pose) -> LinkRollCheck:
+    def checks(self, X: Array) -> list[LinkRollCheck]:
+        """:func:`link_roll_check` of every rolling contact along the states ``X`` ``(n, M + 6)``."""
+        return [link_roll_check(self.hand, ref, self.radius, X, self.state.pose, z, self.axial)
+                for ref, z in zip(self.refs, self.offsets, strict=True)]
+
+    @property
+    def axial(self) -> bool:
+        """Whether the object is a cylinder (its axis checked parallel to the links')."""
+        return isinstance(self.scene.object.shape, Cylinder)
+
+
+def link_roll_check(hand: HandKinematics, ref: BodyRef, radius: float, X: Array, start: Pose, offset: float = 0.0,
+                    axial: bool = False) -> LinkRollCheck:
     """A sphere of ``radius`` rolling on the capsule link ``ref`` along the states ``X`` ``(n, M + 6)``
     (``[q; s]``, the sphere at ``start.displaced(s)``), measured from the states alone: per state
     the gap; per segment, in the link's frame (``R_L^T (p - o_L)`` the centre ``c``, ``R_L^T R`` the
@@ -213,22 +280,29 @@ def link_roll_check(hand: HandKinematics, ref: BodyRef, radius: float, X: Array,
     ``|dc + omega_rel x (-r u_mid)|`` (``u_mid`` the normal halfway; zero to third order per segment
     when it rolls, exactly the plane's ``dp + omega x (-r n)`` of
     :func:`planner.object_motion.rolling_slip` on a flat side), and the contact point's travels on
-    the link (link frame) and on the sphere (object frame)."""
+    the link (link frame) and on the sphere (object frame). A cylinder's contact at the axial
+    coordinate ``offset`` (``axial``): the same with its axis point ``P = p + z a`` for the centre,
+    and the largest sine of the angle between its axis and the link's."""
     X = np.asarray(X, dtype=float)
     M = hand.M
-    gaps, cs, Rs, us, on_link, on_obj = [], [], [], [], [], []
+    gaps, cs, Rs, us, on_link, on_obj, tilt = [], [], [], [], [], [], [0.0]
     for x in X:
         q = x[:M]
         pose = start.displaced(x[M:])
-        g, u, _ = link_contact(hand, ref, radius, q, pose.position)
+        P = axis_point(pose, offset)
+        g, u, _ = link_contact(hand, ref, radius, q, P)
         R_L, o_L = hand.body_pose(ref, q)
         gaps.append(abs(g))
-        cs.append(R_L.T @ (pose.position - o_L))
+        cs.append(R_L.T @ (P - o_L))
         Rs.append(R_L.T @ pose.rotation)
         us.append(R_L.T @ u)
-        contact = pose.position - radius * u
+        contact = P - radius * u
         on_link.append(R_L.T @ (contact - o_L))
         on_obj.append(pose.to_local(contact))
+        if axial:
+            a, b = hand.body_segment(ref, q)
+            e = (b - a) / np.linalg.norm(b - a)
+            tilt.append(float(np.linalg.norm(np.cross(pose.rotation[:, 2], e))))
     slip = turn = 0.0
     for k in range(len(X) - 1):
         w = matrix_to_rotvec(Rs[k + 1] @ Rs[k].T)  # (3,)
@@ -237,4 +311,4 @@ def link_roll_check(hand: HandKinematics, ref: BodyRef, radius: float, X: Array,
         slip += float(np.linalg.norm(cs[k + 1] - cs[k] + np.cross(w, -radius * um)))
         turn += float(np.linalg.norm(w))
     travel = [float(sum(np.linalg.norm(b - a) for a, b in itertools.pairwise(pts))) for pts in (on_link, on_obj)]
-    return LinkRollCheck(max(gaps, default=0.0), slip, travel[0], travel[1], turn)
+    return LinkRollCheck(max(gaps, default=0.0), slip, travel[0], travel[1], turn, max(tilt))

@@ -56,7 +56,15 @@ from analysis.scene import Cylinder, Disk, Scene, Sphere
 from planner.budget import CheckBudget
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel
 from planner.ik import joint_limits
-from planner.link_roll import LINK_ROLL_SLIP_TOL, LinkRollingMotion, link_contact, link_roll_check, link_rolls
+from planner.link_roll import (
+    LINK_ROLL_SLIP_TOL,
+    LinkRollingMotion,
+    axial_offset,
+    axis_point,
+    link_contact,
+    link_rolls,
+    object_radius,
+)
 from planner.manifold import ContactManifold, pose_displacement, project_manifold
 from planner.state import GraspContact, GraspState
 
@@ -137,20 +145,22 @@ def rolled_contacts(hand: HandKinematics, scene: Scene, state: GraspState, stick
 
 def _link_rolled(hand: HandKinematics, scene: Scene, state: GraspState, sticking: Sequence[int], q: Array,
                  s: Array, out: list[GraspContact]) -> None:
-    """Set in ``out`` each contact of a 3-D sphere rolling on a capsule link's side
-    (:func:`planner.link_roll.link_rolls`) at its rolled point ``c = p - r u`` (new point on the
-    link and on the sphere, inward normal ``R^T u``; ``u`` the unit normal from the link's axis to
-    the centre ``p``) with the hand at ``q`` and the object at displacement ``s``."""
+    """Set in ``out`` each contact of a 3-D sphere, or a cylinder along the link, rolling on a capsule
+    link's side (:func:`planner.link_roll.link_rolls`) at its rolled point ``c = P - r u`` (new
+    point on the link and on the object, inward normal ``R^T u``; ``P = p + z a`` the object's
+    axis point at the contact's axial coordinate, the centre ``p`` of a sphere, ``u`` the unit
+    normal from the link's axis to ``P``) with the hand at ``q`` and the object at displacement ``s``."""
     rolls = link_rolls(hand, scene, state, sticking)
     if not rolls:
         return
-    r = float(scene.object.shape.radius)  # type: ignore[union-attr]  # a sphere (link_rolls)
+    r = object_radius(scene)
     pose = state.pose.displaced(np.asarray(s, dtype=float))
     for i in rolls:
         ref = hand.resolve_body(state.contacts[i].body)
         assert ref is not None
-        _, u, _ = link_contact(hand, ref, r, np.asarray(q, dtype=float), pose.position)
-        c_w = pose.position - r * u
+        P = axis_point(pose, axial_offset(scene, state, i))
+        _, u, _ = link_contact(hand, ref, r, np.asarray(q, dtype=float), P)
+        c_w = P - r * u
         c = out[i]
         out[i] = GraspContact(c.body, hand.to_local(ref, c_w, q), pose.to_local(c_w), pose.R_d.T @ u, c.mu, c.origin)
 
@@ -660,8 +670,8 @@ def _checked_link_rolling(model: CollisionModel, state: GraspState, goal: Object
     assert goal.direction is not None
     if direction_cosines(S, goal.direction).min() < MIN_DIRECTION_COSINE:
         return None
-    slips = [link_roll_check(model.hand, ref, rolling.radius, X, state.pose).slip for ref in rolling.refs]
-    if max(slips) > ROLL_SLIP_TOL or rolling_slip(rolling.base, S) > ROLL_SLIP_TOL:
+    checks = rolling.checks(X)
+    if max(max(c.slip, c.axis_angle) for c in checks) > ROLL_SLIP_TOL or rolling_slip(rolling.base, S) > ROLL_SLIP_TOL:
         return None
     return ConstrainedObjectMotion(goal.q_path, goal.pose_path, S, goal.separations, goal.length, residual, step,
                                    len(X), 0, time.perf_counter() - t0)

@@ -55,7 +55,7 @@ from analysis.scene import Box, Cylinder, Disk, Scene, Sphere
 from analysis.torques import torque_set
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel, path_clearance_certified
 from planner.link_release import OVERLAP_SLACK, ROUNDING
-from planner.link_roll import link_contact, link_roll_check, link_rolls
+from planner.link_roll import axial_offset, axis_point, link_contact, link_roll_check, link_rolls, object_radius
 from planner.manifold import pose_displacement
 from planner.motion_length import line_contacts, torque_margin, waypoint_state
 from planner.object_motion import (
@@ -560,14 +560,17 @@ def _link_rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, t
     waypoint; the slip, in the link's frame, ``|dc + omega_rel x (-r u_mid)|`` summed over the
     segments, zero; the contact point's travel on the link (link frame) equal to its travel on the
     sphere (object frame); the state after the step has the contact at the rolled point
-    ``p - r u`` (on the link and on the sphere) with the normal ``u``. All within :data:`ROLL_TOL`."""
+    ``p - r u`` (on the link and on the sphere) with the normal ``u``. A cylinder lying along the
+    link (its line contact's two ends): the same at each end with its axis point ``P = p + z a`` for
+    the centre, and its axis parallel to the link's. All within :data:`ROLL_TOL`."""
     t = step.transition
     sliding = {int(i) for i in getattr(t.figures, "sliding_contacts", ())}
     sticking = [i for i, ch in enumerate(t.combination) if ch != "D" and i not in sliding]
     rolls = link_rolls(hand, scene, step.before, sticking)
     if not rolls:
         return []
-    r = float(scene.object.shape.radius)  # type: ignore[union-attr]  # a sphere (link_rolls)
+    r = object_radius(scene)
+    axial = isinstance(scene.object.shape, Cylinder)
     X = np.array([np.concatenate([q, pose_displacement(step.before, pose)])
                   for q, pose in zip(t.q_path, t.object_path, strict=True)])  # (n, M + 6)
     after = step.after
@@ -576,7 +579,11 @@ def _link_rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, t
         c = step.before.contacts[i]
         ref = hand.resolve_body(c.body)
         assert ref is not None
-        chk = link_roll_check(hand, ref, r, X, step.before.pose)
+        z = axial_offset(scene, step.before, i)
+        chk = link_roll_check(hand, ref, r, X, step.before.pose, z, axial)
+        if chk.axis_angle > ROLL_TOL:
+            out.append(f"{tag}: rolling contact {i} ({c.body}): the cylinder's axis leaves the link's "
+                       f"(sine {chk.axis_angle:.3g})")
         if chk.max_gap > ROLL_TOL:
             out.append(f"{tag}: rolling contact {i} ({c.body}) leaves the link's surface (gap {chk.max_gap:.3g})")
         if chk.slip > ROLL_TOL:
@@ -584,8 +591,9 @@ def _link_rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, t
         if abs(chk.travel_link - chk.travel_object) > ROLL_TOL:
             out.append(f"{tag}: rolling contact {i} ({c.body}): the contact point travels {chk.travel_link:.6g} on "
                        f"the link and {chk.travel_object:.6g} on the sphere")
-        _, u, _ = link_contact(hand, ref, r, after.q, after.position)
-        y = after.position - r * u  # (3,) the rolled contact
+        P = axis_point(after.pose, z)
+        _, u, _ = link_contact(hand, ref, r, after.q, P)
+        y = P - r * u  # (3,) the rolled contact
         out.extend(_rolled_contact_problems(hand, ref, after, c.body, y, u, r, tag, i))
     return out
 

@@ -404,6 +404,50 @@ def _link_geoms(finger: str, k: int, lk: _LinkSpec, eps: float, assets: list[str
     return out
 
 
+#: the largest sine of the angle between a cylinder object's axis and a capsule link's axis for their
+#: line contact to be simulated at its ends (:func:`_line_contact_feet`)
+LINE_PARALLEL_TOL = 1e-6
+
+
+def _line_contact_feet(scene: Scene, hand: HandKinematics, lk: _LinkSpec, eps: float) -> list[Array] | None:
+    """A capsule link lying along a cylinder object (axes parallel, :data:`LINE_PARALLEL_TOL`) with
+    two or more scene contacts at distinct points (its line contact's ends, the cylinder rolling on
+    it, :mod:`planner.link_roll`): the feet ``(3,)`` of those contacts on the link's axis (this
+    body's frame). MuJoCo collides a capsule with a cylinder at one point (an end of the line, not
+    along it), so such a link touches the object through spheres of its capsule's radius at the
+    feet, each moved inwards along the line by that radius (off the rim's edge): the capsule's own
+    surface in those cross-sections, which stay on the line contact while it rolls about the
+    common axis. None for any other link."""
+    if not isinstance(scene.object.shape, Cylinder) or lk.shapes is not None or not lk.radius > 0.0:
+        return None
+    ref = hand.resolve_body(lk.name)
+    if ref is None:
+        return None
+    a, b = hand.body_segment(ref, hand.q0)
+    axis = object_rotation(scene)[:, 2]
+    if float(np.linalg.norm(np.cross(axis, b - a))) > LINE_PARALLEL_TOL * float(np.linalg.norm(b - a)):
+        return None
+    e = lk.seg_b - lk.seg_a
+    feet: list[Array] = []
+    for c in scene.contacts:
+        if c.body != lk.name:
+            continue
+        x = hand.to_local(ref, np.asarray(c.point, dtype=float), hand.q0)  # (3,) this body's frame
+        t = float(np.clip((x - lk.seg_a) @ e / float(e @ e), 0.0, 1.0))
+        foot = lk.seg_a + t * e
+        if all(np.linalg.norm(foot - f) > 1e-9 for f in feet):
+            feet.append(foot)
+    if len(feet) < 2:
+        return None
+    # the line's ends are the cylinder's rims: a sphere there would touch the rim's edge, whose normal
+    # MuJoCo takes as it may; moved inwards along the line by the sphere's radius it touches the side
+    mid = np.mean(feet, axis=0)
+    inward = [mid - f for f in feet]
+    shift = lk.radius + eps
+    return [f + min(shift, 0.45 * float(np.linalg.norm(v))) * v / float(np.linalg.norm(v))
+            for f, v in zip(feet, inward, strict=True)]
+
+
 def _object_geom(scene: Scene, eps: float, s: float, assets: list[str]) -> str:
     shape = scene.object.shape
     name = OBJECT_GEOM
@@ -531,6 +575,14 @@ def build_mjcf(scene: Scene, params: SimulationParams = DEFAULT_PARAMS, tau: Arr
             lk = links[k]
             a_name, b_name = link_site_names(fm.name, k)
             geoms = _link_geoms(fm.name, k, lk, eps, assets)
+            feet = _line_contact_feet(scene, hand, lk, eps)
+            unpaired: set[str] = set()
+            if feet is not None:  # the capsule (no pair) and a sphere at each end of the line contact
+                unpaired.add(geoms[0][1])
+                size = _f(lk.radius + eps)
+                for i, f in enumerate(feet):
+                    n = f"{geoms[0][1]}:line{i}"
+                    geoms.append((f'<geom name="{_xml_escape(n)}" type="sphere" pos="{_v(f)}" size="{size}"/>', n, 0.0))
             hinge = ""
             if lk.joint is not None:
                 hinge = (
@@ -547,7 +599,7 @@ def build_mjcf(scene: Scene, params: SimulationParams = DEFAULT_PARAMS, tau: Arr
                 + xml
                 + "</body>"
             )
-            body_geoms += [(lk.name, name, margin) for _, name, margin in geoms]
+            body_geoms += [(lk.name, name, margin) for _, name, margin in geoms if name not in unpaired]
         world.append(xml)
         for k in range(fm.n_joints):
             jn = joint_name(fm.name, k)
