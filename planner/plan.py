@@ -252,8 +252,11 @@ class Plan:
 
     @property
     def displacement(self) -> Array:
-        """Planned object displacement (final pose vector minus start)."""
-        return self.final_pose - self.start_pose
+        """Planned object displacement ``s`` ``(D,)`` with ``start.displaced(s) == final`` (the
+        displacement goal's meaning): ``dp`` and, in 3-D, the rotation vector of ``R R_0^T``, not the
+        difference of the pose vectors (which, for an object that starts turned, is not the turn)."""
+        dim = 2 if self.start_pose.size == 3 else 3
+        return Pose.from_vector(self.final_pose, dim).displacement_from(Pose.from_vector(self.start_pose, dim))
 
     def to_json(self) -> dict[str, Any]:
         return {

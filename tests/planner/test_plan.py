@@ -298,3 +298,18 @@ def test_a_validated_grasp_is_entered_only_at_its_own_configuration(planar_scene
     assert nodes.arrives(st.with_contacts(st.contacts, st.q + 0.5 * Q_MATCH))
     assert not nodes.arrives(other)
     assert nodes.rejections["the same grasp is already reached with another hand configuration"] == 1
+
+
+def test_displacement_of_an_object_that_starts_turned_is_its_turn(planar_plan) -> None:  # type: ignore[no-untyped-def]
+    """``Plan.displacement`` is the ``s`` with ``start.displaced(s) == final`` (the displacement
+    goal's meaning): a cylinder that starts turned -90 degrees about x and rolls 0.1 rad about +y
+    (world) has the displacement ``(dp, 0, 0.1, 0)``, not the difference of its pose vectors."""
+    from analysis.pose import Pose
+
+    start = Pose.from_vector([0.0, 0.0, 0.5, -np.pi / 2, 0.0, 0.0], 3)
+    s = np.array([0.05, 0.0, 0.0, 0.0, 0.1, 0.0])
+    final = start.displaced(s)
+    p = replace(planar_plan, start_pose=start.vector(), final_pose=final.vector())
+    np.testing.assert_allclose(p.displacement, s, atol=1e-12)
+    assert float(np.linalg.norm(final.vector() - start.vector() - s)) > 0.01  # the pose vectors' difference is not it
+    np.testing.assert_allclose(planar_plan.displacement, planar_plan.final_pose - planar_plan.start_pose, atol=1e-15)
