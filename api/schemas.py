@@ -9,6 +9,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator
 from analysis.detect import DEFAULT_MU, DEFAULT_TOLERANCE
 from analysis.scene import MAX_MAGNITUDE, Scene
 from planner.goals import Goal
+from planner.options import PlannerOptions
 
 FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 JobStatus = Literal["queued", "running", "succeeded", "failed", "cancelled"]
@@ -99,8 +100,8 @@ class PlannerSwitches(_In):
                            "bodies")
     effort_weight: Annotated[float, Field(ge=0, allow_inf_nan=False, strict=True)] | None = Field(
         None, description="weight of a transition's effort (|joint torques|, N m) in its cost, >= 0; null: the "
-                          "planner's default 0.1 (0: the cheapest plan by motions and contacts only, e.g. a "
-                          "sphere rolled on a link's side rather than pushed by a fingertip)")
+                          f"planner's default {PlannerOptions().effort_weight:g} (0: the cheapest plan by motions and "
+                          "contacts only, e.g. a sphere rolled on a link's side rather than pushed by a fingertip)")
 
 
 class PlanCreate(_In):

@@ -227,3 +227,13 @@ def test_ctp_plan_contact_goal_by_a_slide_and_its_replay(tmp_path: Path) -> None
     assert r.exit_code == 0 and "slid in" in r.output and "within tolerance" in r.output, r.output
     r = CliRunner().invoke(app, ["plan", scene, *goal, "--time-limit", "120"])
     assert r.exit_code == 1 and "no plan" in r.output, r.output
+
+
+def test_ctp_plan_help_states_the_planners_default_effort_weight() -> None:
+    """The help of ``--effort-weight`` names ``PlannerOptions``' own default (the CLI imports the
+    planner lazily, so the number is written in the help text; this keeps the two equal)."""
+    from planner.options import PlannerOptions
+
+    r = CliRunner().invoke(app, ["plan", "--help"], env={"COLUMNS": "400", "NO_COLOR": "1"})
+    assert r.exit_code == 0
+    assert f"default {PlannerOptions().effort_weight:g}" in " ".join(r.output.split())
