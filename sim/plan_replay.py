@@ -359,7 +359,7 @@ class StepSimulation:
     kind: str
     combination: str
     driven_finger: str | None  # the finger that releases or makes contact (None: object motion)
-    planned: Array  # (D,) planned object displacement of the step (pose-vector difference)
+    planned: Array  # (D,) planned object displacement of the step (dp and the turn log(R R_0^T))
     simulated: Array  # (D,) simulated displacement over the step
     max_deviation: float  # largest |dp| + s |dtheta| from the planned object path during the step
     tracking_error: float  # rad, largest per-step tracking error of driven fingers (0: none driven)
@@ -435,13 +435,14 @@ class PlanSimulation:
 
     @property
     def planned(self) -> Array:
-        """Planned total displacement ``(D,)``."""
-        return np.asarray(self.planned_final_pose - self.start_pose)
+        """Planned total displacement ``(D,)``: ``dp`` and the turn ``log(R R_0^T)``
+        (:meth:`analysis.pose.Pose.displacement_from`, as ``Plan.displacement``)."""
+        return _displacement(self.start_pose, self.planned_final_pose)
 
     @property
     def simulated(self) -> Array:
-        """Simulated total displacement ``(D,)``."""
-        return np.asarray(self.simulated_final_pose - self.start_pose)
+        """Simulated total displacement ``(D,)``, as :attr:`planned`."""
+        return _displacement(self.start_pose, self.simulated_final_pose)
 
     @property
     def error(self) -> PoseError:
@@ -784,7 +785,7 @@ def simulate_plan(
             letters = {"release": st.combination, "slide": st.combination.replace("S", "D")}.get(
                 st.kind, "F" * step.before.L)  # a release's D lets go, a slide's S is driven
             run.posture = _hold_posture(run, hand, _finger_points(hand, step.before.contacts, letters), st.q_path[0])
-        planned = st.object_path[-1] - st.object_path[0]  # (D,)
+        planned = _displacement(st.object_path[0], st.object_path[-1])  # (D,)
         busy_before = _fingers_touching(hand, st.contacts_before)
         busy_after = _fingers_touching(hand, st.contacts_after)
         all_f = set(range(len(hand.fingers)))
@@ -849,7 +850,7 @@ def simulate_plan(
         out.append(StepSimulation(
             index=step.index, kind=st.kind, combination=st.combination,
             driven_finger=None if finger is None else hand.fingers[finger].name,
-            planned=planned, simulated=run.pose().vector() - pose0.vector(), max_deviation=run.max_dev,
+            planned=planned, simulated=run.pose().displacement_from(pose0), max_deviation=run.max_dev,
             tracking_error=run.track, joint_error=float(np.max(np.abs(run.q() - st.q_path[-1]))),
             duration=run.t - t0, dropped=dropped, note=note, hold_servo=run.hold_servo,
             slide_planned=None if slide is None else slide[0], slide_simulated=None if slide is None else slide[1],
@@ -1077,6 +1078,14 @@ def _slide(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, step: Plan
     err = float(np.linalg.norm((x1 - x0) - planned) / np.linalg.norm(planned))
     return (f"slid in {T:.3g} s: contact moved {np.linalg.norm(x1 - x0):.4g} (planned {np.linalg.norm(planned):.4g}, "
             f"error {100 * err:.2f} %)"), (planned, x1 - x0)
+
+
+def _displacement(start: Array, end: Array) -> Array:
+    """The displacement ``s`` ``(D,)`` from the pose vector ``start`` to ``end``
+    (``Pose.displaced(s)``'s meaning: ``dp`` and, in 3-D, the rotation vector of ``R R_0^T``; the
+    pose vectors' difference is not the turn of an object that starts turned)."""
+    d = 2 if len(start) == 3 else 3
+    return Pose.from_vector(end, d).displacement_from(Pose.from_vector(start, d))
 
 
 def _object_motion(run: _Run, plan: Plan, scene: Scene, hand: HandKinematics, step: PlanStep,

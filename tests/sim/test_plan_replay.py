@@ -254,3 +254,16 @@ def test_ctp_simulate_off_tolerance_exits_3(tmp_path) -> None:  # type: ignore[n
     assert not rep["ok"] and not rep["dropped"]
     assert rep["relative_position_error"] > 0.1 and rep["relative_rotation_error"] <= 0.05
     assert rep["position_error"] == pytest.approx(0.2 * lift, rel=0.3)
+
+
+def test_step_and_total_displacements_are_the_turn_not_the_pose_vectors_difference() -> None:
+    """The replay's planned and simulated displacements (per step and in total, printed by ``ctp
+    simulate``) are ``Pose.displacement_from``'s: a cylinder that starts turned -90 degrees about x
+    and rolls 0.1 rad about +y has the displacement ``(dp, 0, 0.1, 0)``; 2-D angles are not wrapped."""
+    from sim.plan_replay import _displacement
+
+    start = Pose.from_vector([0.0, 0.0, 0.5, -np.pi / 2, 0.0, 0.0], 3)
+    s = np.array([0.05, 0.0, 0.0, 0.0, 0.1, 0.0])
+    np.testing.assert_allclose(_displacement(start.vector(), start.displaced(s).vector()), s, atol=1e-12)
+    np.testing.assert_allclose(_displacement(np.array([0.0, 0.0, 3.0]), np.array([0.1, 0.0, -3.0])),
+                               [0.1, 0.0, -6.0], atol=1e-15)
