@@ -1,6 +1,6 @@
 """What the ``examples/make_*.py`` scripts share: writing a generated scene (or, with ``--check``,
-comparing it with the committed file), the pushing finger of the rolling examples and their sphere on a
-table."""
+comparing it with the committed file), the pushing finger of the rolling examples and their round object on
+a table."""
 
 from __future__ import annotations
 
@@ -63,25 +63,27 @@ def pushing_finger(centre: np.ndarray, radius: float, elevation: float, base: np
     return finger, tip, out
 
 
-def sphere_on_table(name: str, description: str, radius: float, finger: dict[str, Any], contact: np.ndarray,
-                    out: np.ndarray, mu: float) -> dict[str, Any]:
-    """The rolling examples' scene: a sphere of ``radius`` resting on a table (a fixed box whose top
-    face is ``z = 0``) with its centre at ``(0, 0, radius)``, a unit weight, and two contacts of
-    friction ``mu``: the finger's last link ``f/2`` at ``contact`` (normal ``-out``, into the
-    sphere) and the table under the sphere."""
+def on_table(name: str, description: str, shape: dict[str, Any], finger: dict[str, Any],
+             finger_points: list[np.ndarray], out: np.ndarray, mu: float, table_points: list[list[float]],
+             quat_wxyz: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)) -> dict[str, Any]:
+    """The rolling examples' scene: a round object (``shape``, a sphere or a cylinder lying on its
+    side, turned by ``quat_wxyz``) resting on a table (a fixed box whose top face is ``z = 0``) with
+    its centre at ``(0, 0, radius)``, a unit weight, the finger's last link ``f/2`` touching at
+    ``finger_points`` (normal ``-out``, into the object) and the table at ``table_points``, all of
+    friction ``mu``."""
     return {
         "name": name,
         "description": description,
         "dim": 3,
-        "object": {"pose": {"position": [0.0, 0.0, radius], "quat_wxyz": [1.0, 0.0, 0.0, 0.0]},
-                   "shape": {"type": "sphere", "radius": radius}},
+        "object": {"pose": {"position": [0.0, 0.0, float(shape["radius"])], "quat_wxyz": list(quat_wxyz)},
+                   "shape": shape},
         "external_wrench": [0.0, 0.0, -1.0, 0.0, 0.0, 0.0],
         "fixed_bodies": [{"name": "table", "shape": {"type": "box", "size": [4.0, 3.0, 0.1],
                                                      "position": [0.0, 0.0, -0.05]}}],
         "fingers": [finger],
         "contacts": [
-            {"body": "f/2", "point": [float(v) for v in np.round(contact, 12)],
-             "normal": [float(v) for v in np.round(-out, 12)], "mu": mu},
-            {"body": "table", "point": [0.0, 0.0, 0.0], "normal": [0.0, 0.0, 1.0], "mu": mu},
+            *({"body": "f/2", "point": [float(v) for v in np.round(c, 12)],
+               "normal": [float(v) for v in np.round(-out, 12)], "mu": mu} for c in finger_points),
+            *({"body": "table", "point": t, "normal": [0.0, 0.0, 1.0], "mu": mu} for t in table_points),
         ],
     }

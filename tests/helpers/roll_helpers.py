@@ -5,10 +5,13 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 from closure_helpers import EXAMPLES
+from scipy.spatial.transform import Rotation
 
 from analysis.loader import load_scene
 from analysis.pose import Pose
+from analysis.scene import Finger3D, Scene
 from planner import Goal, plan
 from planner.options import PlannerOptions
 from planner.verify import verify_plan
@@ -30,3 +33,18 @@ def roll_and_replay(example: str, options: PlannerOptions | None = None) -> tupl
     assert err.relative_position <= 0.05 and err.relative_rotation <= 0.05, sim.to_json()
     assert sim.ok
     return scene, p, sim, Pose.from_vector(sim.start_pose, 3), Pose.from_vector(sim.simulated_final_pose, 3)
+
+
+def independent_link_axis(scene: Scene, q: np.ndarray, link: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Independent forward kinematics of the scene's first finger (scipy rotations, not the
+    project's kinematics): link ``link``'s axis ends ``(3,)`` and its frame's rotation ``(3, 3)``."""
+    f = scene.fingers[0]
+    assert isinstance(f, Finger3D)
+    w, x, y, z = f.base.quat_wxyz
+    Rk = Rotation.from_quat([x, y, z, w]).as_matrix()
+    pk = np.asarray(f.base.position, dtype=float)
+    for j, joint in enumerate(f.joints[: link + 1]):
+        pk = pk + Rk @ np.asarray(joint.origin, dtype=float)
+        Rk = Rk @ Rotation.from_rotvec(q[j] * np.asarray(joint.axis, dtype=float)).as_matrix()
+    end = f.joints[link + 1].origin if link + 1 < len(f.joints) else f.tip
+    return pk, pk + Rk @ np.asarray(end, dtype=float), Rk

@@ -14,11 +14,12 @@ import coal
 import numpy as np
 import pytest
 from closure_helpers import EXAMPLES
+from roll_helpers import independent_link_axis
 from scipy.spatial.transform import Rotation
 
 from analysis.kinematics import HandKinematics
 from analysis.loader import load_scene
-from analysis.scene import Finger3D, Scene
+from analysis.scene import Scene
 from planner import Goal, plan
 from planner.link_roll import LINK_ROLL_SLIP_TOL, LinkRollingMotion, link_roll_check, link_rolls
 from planner.manifold import pose_displacement, project_manifold
@@ -48,24 +49,9 @@ def setup(scene: Scene) -> tuple[HandKinematics, GraspState]:
     return hand, state_from_scene(scene, hand)
 
 
-def _link_axis(scene: Scene, q: np.ndarray, link: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Independent forward kinematics of the scene's finger (scipy rotations): the link's axis ends
-    ``(3,)`` and its frame's rotation ``(3, 3)``."""
-    f = scene.fingers[0]
-    assert isinstance(f, Finger3D)
-    w, x, y, z = f.base.quat_wxyz
-    Rk = Rotation.from_quat([x, y, z, w]).as_matrix()
-    pk = np.asarray(f.base.position, dtype=float)
-    for j, joint in enumerate(f.joints[: link + 1]):
-        pk = pk + Rk @ np.asarray(joint.origin, dtype=float)
-        Rk = Rk @ Rotation.from_rotvec(q[j] * np.asarray(joint.axis, dtype=float)).as_matrix()
-    end = f.joints[link + 1].origin if link + 1 < len(f.joints) else f.tip
-    return pk, pk + Rk @ np.asarray(end, dtype=float), Rk
-
-
 def _coal_gap(scene: Scene, q: np.ndarray, centre: np.ndarray) -> float:
     """Signed distance of the sphere at ``centre`` from the capsule link 2 (coal)."""
-    a, b, _ = _link_axis(scene, q, 2)
+    a, b, _ = independent_link_axis(scene, q, 2)
     e = b - a
     L = float(np.linalg.norm(e))
     z = e / L
@@ -122,7 +108,7 @@ def test_no_slip_rows_are_the_material_points_velocities(scene: Scene,
         xd = rng.standard_normal(9)
         q, s = x[:3], x[3:]
         pose = lm.pose(s)
-        a, b, _ = _link_axis(scene, q, 2)
+        a, b, _ = independent_link_axis(scene, q, 2)
         t = float(np.clip((pose.position - a) @ (b - a) / ((b - a) @ (b - a)), 0, 1))
         u = pose.position - (a + t * (b - a))
         c = pose.position - R * u / np.linalg.norm(u)  # the contact point on the sphere
@@ -144,8 +130,8 @@ def test_a_glued_link_point_presses_the_sphere_into_the_link(scene: Scene,
     X = _glued_path(scene, hand, st)
     q, pose = X[-1, :3], st.pose.displaced(X[-1, 3:])
     gap = _coal_gap(scene, q, pose.position)
-    _, _, R0 = _link_axis(scene, st.q, 2)
-    _, _, R1 = _link_axis(scene, q, 2)
+    _, _, R0 = independent_link_axis(scene, st.q, 2)
+    _, _, R1 = independent_link_axis(scene, q, 2)
     phi = float(np.linalg.norm(Rotation.from_matrix((R1.T @ pose.rotation) @ (R0.T @ st.pose.rotation).T)
                                .as_rotvec()))
     assert gap == pytest.approx(-R * (1 - np.cos(phi)), abs=1e-6)
@@ -177,7 +163,7 @@ def test_the_rolling_path_keeps_the_gap_and_does_not_slip(scene: Scene,
     # the rolled contact: on the link's surface (independent FK) and on the sphere
     out = rolled_contacts(hand, scene, st, [LINK, TABLE], path.X[-1, :3], path.X[-1, 3:])
     q, pose = path.X[-1, :3], st.pose.displaced(path.X[-1, 3:])
-    a, b, Rl = _link_axis(scene, q, 2)
+    a, b, Rl = independent_link_axis(scene, q, 2)
     c_world = a + Rl @ out[LINK].point_body
     t = float((c_world - a) @ (b - a) / ((b - a) @ (b - a)))
     assert 0 < t < 1 and np.linalg.norm(c_world - (a + t * (b - a))) == pytest.approx(RHO, abs=1e-9)
@@ -194,7 +180,7 @@ def test_on_a_still_link_it_is_the_plane_formula(scene: Scene, setup: tuple[Hand
     hand motion, so the path is the plane case's ray, ``dp + r u x w = 0``, and the contact moves
     ``|dp|`` along the link and ``r |w|`` on the sphere (a great circle's arc)."""
     hand, st = setup
-    a, b, _ = _link_axis(scene, st.q, 2)
+    a, b, _ = independent_link_axis(scene, st.q, 2)
     e = (b - a) / np.linalg.norm(b - a)
     u = (st.pose.position - st.world_point(LINK)) / R
     twist = np.concatenate([e, np.cross(u, e) / R])

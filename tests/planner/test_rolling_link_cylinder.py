@@ -16,12 +16,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from closure_helpers import EXAMPLES
+from roll_helpers import independent_link_axis
 from scipy.spatial.transform import Rotation
 
 from analysis.kinematics import HandKinematics
 from analysis.loader import load_scene
 from analysis.pose import Pose
-from analysis.scene import Finger3D, Scene
+from analysis.scene import Scene
 from planner import Goal, plan
 from planner.link_roll import LINK_ROLL_SLIP_TOL, LinkRollingMotion, link_roll_check, link_rolls
 from planner.manifold import pose_displacement, project_manifold
@@ -32,6 +33,7 @@ from planner.verify import verify_plan
 
 SCENE = EXAMPLES / "cylinder_link_roll.json"
 R, H, RHO = 0.5, 0.8, 0.05  # the cylinder's radius and length, the link's radius in SCENE
+LINK = 2  # the finger's last link, the one the cylinder rolls on
 ENDS, TABLE = (0, 1), (2, 3)  # contact indices in SCENE: the link's line contact, the table's
 ALL = [*ENDS, *TABLE]
 #: rolling on the table along +x: omega = (0, 1/r, 0) per unit of centre motion
@@ -51,24 +53,10 @@ def setup(scene: Scene) -> tuple[HandKinematics, GraspState]:
     return hand, state_from_scene(scene, hand)
 
 
-def _link_axis(scene: Scene, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Independent forward kinematics of the scene's finger (scipy rotations): the last link's axis
-    ends ``(3,)`` and its frame's rotation ``(3, 3)``."""
-    f = scene.fingers[0]
-    assert isinstance(f, Finger3D)
-    w, x, y, z = f.base.quat_wxyz
-    Rk = Rotation.from_quat([x, y, z, w]).as_matrix()
-    pk = np.asarray(f.base.position, dtype=float)
-    for j, joint in enumerate(f.joints):
-        pk = pk + Rk @ np.asarray(joint.origin, dtype=float)
-        Rk = Rk @ Rotation.from_rotvec(q[j] * np.asarray(joint.axis, dtype=float)).as_matrix()
-    return pk, pk + Rk @ np.asarray(f.tip, dtype=float), Rk
-
-
 def _gaps(scene: Scene, q: np.ndarray, pose: Pose) -> tuple[list[float], float]:
     """The gap at each end ``z = -+H/2`` of the cylinder (its axis point's distance from the link's
     axis minus ``R + RHO``) and the sine of the angle between the two axes."""
-    a, b, _ = _link_axis(scene, q)
+    a, b, _ = independent_link_axis(scene, q, LINK)
     e = (b - a) / np.linalg.norm(b - a)
     axis = pose.rotation[:, 2]
     gaps = []
@@ -115,7 +103,7 @@ def test_no_slip_rows_are_the_material_points_velocities(scene: Scene,
         xd = rng.standard_normal(9)
         q, s = x[:3], x[3:]
         pose = lm.pose(s)
-        a, b, _ = _link_axis(scene, q)
+        a, b, _ = independent_link_axis(scene, q, LINK)
         e = (b - a) / np.linalg.norm(b - a)
         rows = lm.no_slip(x) @ xd
         for k, z in enumerate((-H / 2, H / 2)):
@@ -159,8 +147,8 @@ def test_glued_link_points_press_the_cylinder_into_the_link(scene: Scene,
     X = _glued_path(scene, hand, st)
     q, pose = X[-1, :3], st.pose.displaced(X[-1, 3:])
     gaps, tilt = _gaps(scene, q, pose)
-    _, _, R0 = _link_axis(scene, st.q)
-    _, _, R1 = _link_axis(scene, q)
+    _, _, R0 = independent_link_axis(scene, st.q, LINK)
+    _, _, R1 = independent_link_axis(scene, q, LINK)
     phi = float(np.linalg.norm(Rotation.from_matrix((R1.T @ pose.rotation) @ (R0.T @ st.pose.rotation).T)
                                .as_rotvec()))
     np.testing.assert_allclose(gaps, np.sqrt(RHO**2 + R**2 + 2 * RHO * R * np.cos(phi)) - RHO - R, atol=1e-9)
@@ -194,7 +182,7 @@ def test_the_rolling_path_keeps_both_gaps_and_does_not_slip(scene: Scene,
     assert 3.5 < coarse.slip / path.slip < 4.5
     out = rolled_contacts(hand, scene, st, ALL, path.X[-1, :3], path.X[-1, 3:])
     q, pose = path.X[-1, :3], st.pose.displaced(path.X[-1, 3:])
-    a, b, Rl = _link_axis(scene, q)
+    a, b, Rl = independent_link_axis(scene, q, LINK)
     e = (b - a) / np.linalg.norm(b - a)
     for i, z in zip(ENDS, (-H / 2, H / 2), strict=True):
         c_world = a + Rl @ out[i].point_body
