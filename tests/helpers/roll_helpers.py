@@ -24,15 +24,24 @@ def roll_and_replay(example: str, options: PlannerOptions | None = None) -> tupl
     displacement (position and rotation each). Returns the scene, the plan, the simulation and
     MuJoCo's start and final poses of the object."""
     scene = load_scene(EXAMPLES / f"{example}.json")
-    p = plan(scene, Goal(type="displacement", displacement=[0.05, 0.0, 0.0, 0.0, 0.0, 0.0], position_tolerance=0.005,
-                         rotation_tolerance="free"), options=options or PlannerOptions(sliding_motions=False))
+    p, sim = plan_verify_replay(scene, Goal(type="displacement", displacement=[0.05, 0.0, 0.0, 0.0, 0.0, 0.0],
+                                            position_tolerance=0.005, rotation_tolerance="free"),
+                                options or PlannerOptions(sliding_motions=False))
+    return scene, p, sim, Pose.from_vector(sim.start_pose, 3), Pose.from_vector(sim.simulated_final_pose, 3)
+
+
+def plan_verify_replay(scene: Scene, goal: Goal, options: PlannerOptions | None = None) -> tuple[Any, Any]:
+    """``scene`` planned towards ``goal``: the plan found and passing ``verify_plan``, its continuous
+    MuJoCo replay not dropped and within 5 % of the planned displacement (position and rotation
+    each). Returns the plan and the simulation."""
+    p = plan(scene, goal, options=options)
     assert p.found and verify_plan(scene, p) == [], p.reason
     sim = simulate_plan(scene, p)
     assert not sim.dropped, sim.drop_reason
     err = sim.error
     assert err.relative_position <= 0.05 and err.relative_rotation <= 0.05, sim.to_json()
     assert sim.ok
-    return scene, p, sim, Pose.from_vector(sim.start_pose, 3), Pose.from_vector(sim.simulated_final_pose, 3)
+    return p, sim
 
 
 def independent_link_axis(scene: Scene, q: np.ndarray, link: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -9,13 +9,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from closure_helpers import EXAMPLES
+from roll_helpers import plan_verify_replay
 
 from analysis.kinematics import HandKinematics
 from analysis.loader import load_scene
-from planner import Goal, plan
-from planner.verify import verify_plan
+from planner import Goal
 from sim.mjcf import link_body_name
-from sim.plan_replay import simulate_plan
 
 R = 0.3  # the disk's radius
 
@@ -24,14 +23,8 @@ R = 0.3  # the disk's radius
 def test_rolling_plan_replays_within_5_percent() -> None:
     scene = load_scene(EXAMPLES / "planar_disk_rolling_v.json")
     hand = HandKinematics.from_scene(scene)
-    p = plan(scene, Goal(type="displacement", displacement=[-0.03, 0.0, 0.0], position_tolerance=0.003,
-                         rotation_tolerance="free"))
-    assert p.found and verify_plan(scene, p) == [], p.reason
-    sim = simulate_plan(scene, p)
-    assert not sim.dropped, sim.drop_reason
-    err = sim.error
-    assert err.relative_position <= 0.05 and err.relative_rotation <= 0.05, sim.to_json()
-    assert sim.ok
+    p, sim = plan_verify_replay(scene, Goal(type="displacement", displacement=[-0.03, 0.0, 0.0],
+                                            position_tolerance=0.003, rotation_tolerance="free"))
     np.testing.assert_allclose(sim.simulated[[0, 2]], sim.planned[[0, 2]], rtol=0.05)
     assert sim.start_q is not None and sim.final_q is not None
     assert sim.start_contacts is not None and sim.final_contacts is not None
