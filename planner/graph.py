@@ -36,8 +36,12 @@ a node is a goal, and the search's heuristic, are in :mod:`planner.goals`.
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
+from dataclasses import replace
+from functools import partial
+from typing import Any, TypeVar
 
+from analysis.exceptions import SolverError
 from planner.contact_edges import contact_edges
 from planner.link_release import link_release_edges
 from planner.link_replace import replace_edges
@@ -48,6 +52,8 @@ from planner.release_edges import release_edges
 from planner.search import Successor
 from planner.state import GraspState
 from planner.transition import Transition
+
+_Edge = TypeVar("_Edge")
 
 #: goals reached by moving the object: their searches get no link releases
 #: (:mod:`planner.link_release`). Those are short and leave the pose where it is, so they are
@@ -72,17 +78,46 @@ class ContactStateGraph(GraphNodes):
         """Every edge out of a node: the checked releases, then the lazy object motions and contacts."""
         state = self.states[key]
         out: list[Successor] = []
-        links = [] if self.goal.type in MOTION_GOALS else self.link_release_edges(state, self.goal.type in TIP_GOALS)
-        for t, new in self.release_edges(state) + links:
+        links = ([] if self.goal.type in MOTION_GOALS else
+                 self._decided("link release", lambda: self.link_release_edges(state, self.goal.type in TIP_GOALS)))
+        for t, new in self._decided("release", lambda: self.release_edges(state)) + links:
             if self.arrives(new):  # a validated node is entered only at its own configuration
                 out.append(Successor(self.add(new), t.cost, t))
-        out.extend(self.object_motion_edges(state))
-        out.extend(self.contact_edges(state))
+        lazy: list[tuple[str, Callable[[GraspState], list[Successor]]]] = [
+            ("object motion", self.object_motion_edges), ("contact", self.contact_edges)]
         if self.options.link_replacement:
-            out.extend(self.replace_edges(state))
+            lazy.append(("link re-placement", self.replace_edges))
         if self.options.contact_slides:
-            out.extend(self.slide_edges(state))
+            lazy.append(("slide", self.slide_edges))
+        for kind, edges in lazy:
+            out.extend(self._lazy_decided(kind, s) for s in self._decided(kind, partial(edges, state)))
         return out
+
+    def _decided(self, kind: str, edges: Callable[[], list[_Edge]]) -> list[_Edge]:
+        """``edges()``, or none of them when a solver leaves one of their checks undecided
+        (:class:`~analysis.exceptions.SolverError`, after its own retries): counted as a rejected
+        transition that names the solver's message, so the search goes on and a "no plan" says
+        so, instead of stopping the whole plan on one undecided LP."""
+        try:
+            return edges()
+        except SolverError as e:
+            self.reject(f"{kind}: a solver could not decide it ({e})")
+            return []
+
+    def _lazy_decided(self, kind: str, s: Successor) -> Successor:
+        """``s`` whose lazy check (if any) counts a solver's undecided LP as in :meth:`_decided`."""
+        validate = s.validate
+        if validate is None:
+            return s
+
+        def checked() -> tuple[float, Any] | None:
+            try:
+                return validate()
+            except SolverError as e:
+                self.reject(f"{kind}: a solver could not decide it ({e})")
+                return None
+
+        return replace(s, validate=checked)
 
     def slide_edges(self, state: GraspState) -> list[Successor]:
         """Eq. (33) with an S-point: a link's contact slides along a face, lazy: the path when the

@@ -40,6 +40,10 @@ INF = highspy.kHighsInf
 #: HiGHS primal/dual feasibility tolerance.
 FEAS_TOL = 1e-10
 
+#: The least violation (:meth:`LPModel.least_violation`) above which an LP undecided by every retry
+#: is infeasible (and at least 10x the model's feasibility tolerance).
+VIOLATION_PROOF = 1e-9
+
 #: Statuses after which the solve is repeated (fresh, then with HiGHS' default settings): an
 #: undecided run, not an answer.
 _RETRY = (highspy.HighsModelStatus.kUnknown, highspy.HighsModelStatus.kSolveError, highspy.HighsModelStatus.kNotset)
@@ -177,6 +181,7 @@ class LPModel:
         feasibility: float = FEAS_TOL,
     ):
         self.n = n
+        self._feasibility = feasibility
         A_ub = np.zeros((0, n)) if A_ub is None else np.asarray(A_ub, dtype=float).reshape(-1, n)
         A_eq = np.zeros((0, n)) if A_eq is None else np.asarray(A_eq, dtype=float).reshape(-1, n)
         b_ub = np.zeros(0) if b_ub is None else np.asarray(b_ub, dtype=float).ravel()
@@ -329,6 +334,30 @@ class LPModel:
             self._h.setOptionValue("solver", "choose")
         return ms
 
+    def least_violation(self) -> float | None:
+        """The least uniform violation ``t >= 0`` of the constraints (``A_ub x <= b_ub + t``,
+        ``|A_eq x - b_eq| <= t``, ``lb - t <= x <= ub + t``), from a model of its own with HiGHS'
+        defaults (always feasible, bounded below by 0), or None if that run is undecided too.
+
+        A ``t`` above the feasibility tolerance proves the constraints infeasible: the last step of
+        an undecided solve (:meth:`solve`). An infeasible least-excess LP of the Baxter lines scene
+        (``tests/analysis/highs_unknown_lp.json``, violated by 4.2e-6) ends 'Unknown' or 'Solve
+        error' in every run of the retry chain, depending on HiGHS' state; this LP decides it."""
+        A = self.A  # (m, n)
+        m_ub, n = self._n_ub, self.n
+        lo, hi = np.flatnonzero(np.isfinite(self.lb)), np.flatnonzero(np.isfinite(self.ub))
+        eye = np.eye(n)
+        rows = np.vstack([A, -A[m_ub:], -eye[lo], eye[hi]])  # (m + m_eq + |lo| + |hi|, n)
+        upper = np.concatenate([self.b_ub, self.b_eq, -self.b_eq, -self.lb[lo], self.ub[hi]])
+        h = _load(np.hstack([rows, -np.ones((rows.shape[0], 1))]), np.full(len(upper), -INF), upper,
+                  np.full(n + 1, -INF), np.r_[np.full(n, INF), INF], {}, "violation model could not be loaded")
+        h.changeColBounds(n, 0.0, INF)  # t >= 0
+        h.changeColCost(n, 1.0)
+        h.run()
+        if h.getModelStatus() != _OPTIMAL:
+            return None
+        return float(h.getInfo().objective_function_value)
+
     def solve(self, c: Array, maximize: bool = False) -> LPResult:
         c = np.asarray(c, dtype=float).ravel()
         sense = -1.0 if maximize else 1.0
@@ -362,6 +391,10 @@ class LPModel:
             ms = ms2
         if ms in (highspy.HighsModelStatus.kTimeLimit, highspy.HighsModelStatus.kIterationLimit):
             raise SolverTimeLimit("HiGHS", self._h.modelStatusToString(ms))
+        if ms in _RETRY:
+            t = self.least_violation()  # undecided after every retry: is it infeasible?
+            if t is not None and t > max(VIOLATION_PROOF, 10.0 * self._feasibility):
+                return LPResult("infeasible", None, None, problem=problem)
         raise SolverError("HiGHS", f"LP ended with status '{self._h.modelStatusToString(ms)}'")
 
 

@@ -174,6 +174,49 @@ def test_infeasible_and_unbounded_lps_report_it():
     assert r.status == "unbounded" and r.objective == np.inf and r.primal_residual() == np.inf
 
 
+def _violation_by_scipy(A_ub: np.ndarray, b_ub: np.ndarray, A_eq: np.ndarray, b_eq: np.ndarray,
+                        lb: np.ndarray) -> float:
+    """The least uniform violation of ``A_ub x <= b_ub``, ``A_eq x = b_eq``, ``x >= lb`` by scipy's
+    linprog, written out here independently of :meth:`LPModel.least_violation`."""
+    n = A_ub.shape[1]
+    fin = np.flatnonzero(np.isfinite(lb))
+    rows = np.vstack([A_ub, A_eq, -A_eq, -np.eye(n)[fin]])
+    b = np.concatenate([b_ub, b_eq, -b_eq, -lb[fin]])
+    res = linprog(np.r_[np.zeros(n), 1.0], A_ub=np.hstack([rows, -np.ones((len(b), 1))]), b_ub=b,
+                  bounds=[(None, None)] * n + [(0.0, None)], method="highs")
+    assert res.status == 0, res.message
+    return float(res.fun)
+
+
+def test_an_lp_undecided_by_every_retry_is_decided_by_its_least_violation() -> None:
+    """The least-excess LP of a release check on the Baxter lines scene ends 'Unknown' or 'Solve
+    error' in every run of the retry chain (it is infeasible by 4.2e-6, near HiGHS' tolerances);
+    it used to stop ``ctp plan ... --link-sliding`` with "HiGHS: LP ended with status 'Unknown'".
+    Its least violation decides it infeasible, and equals scipy's independent one."""
+    d = json.loads(Path(__file__).with_name("highs_unknown_lp.json").read_text())
+    lb = np.array([-np.inf if v is None else v for v in d["lb"]])
+    A_ub, b_ub, A_eq, b_eq = (np.array(d[k]) for k in ("A_ub", "b_ub", "A_eq", "b_eq"))
+    r = solve_lp(np.array(d["c"]), A_ub=A_ub, b_ub=b_ub, A_eq=A_eq, b_eq=b_eq, lb=lb)
+    assert r.status == "infeasible"
+    t = LPModel(len(d["c"]), A_ub, b_ub, A_eq, b_eq, lb).least_violation()
+    ref = _violation_by_scipy(A_ub, b_ub, A_eq, b_eq, lb)
+    assert t is not None and ref > 1e-6
+    assert t == pytest.approx(ref, rel=1e-6)
+
+
+def test_least_violation_known_answers() -> None:
+    rng = np.random.default_rng(3)
+    # x <= -1 and x >= 1: violated by 1 at x = 0; with x >= 2 as a bound as well: by 1.5 at x = 0.5
+    A = np.array([[1.0], [-1.0]])
+    assert LPModel(1, A, np.array([-1.0, -1.0])).least_violation() == pytest.approx(1.0, abs=1e-9)
+    assert LPModel(1, np.array([[1.0]]), np.array([-1.0]), lb=2.0).least_violation() == pytest.approx(1.5, abs=1e-9)
+    # a feasible system (a point satisfies it by construction) is violated by nothing
+    A_ub, A_eq = rng.normal(size=(8, 4)), rng.normal(size=(2, 4))
+    x0 = rng.normal(size=4)
+    t = LPModel(4, A_ub, A_ub @ x0 + 0.1, A_eq, A_eq @ x0, lb=x0 - 1.0, ub=x0 + 1.0).least_violation()
+    assert t is not None and t <= 1e-9
+
+
 def test_known_duals_of_a_small_lp():
     # max x + y s.t. x + 2y <= 4, 3x + y <= 6, x, y >= 0: x = (1.6, 1.2), shadow prices (0.4, 0.2)
     r = solve_lp(np.array([1.0, 1.0]), A_ub=np.array([[1.0, 2.0], [3.0, 1.0]]), b_ub=np.array([4.0, 6.0]),
