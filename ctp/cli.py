@@ -572,6 +572,9 @@ def plan(
         help="pose goal: rotation tolerance in radians, or 'free'; default 0.05")] = None,
     tolerance: Annotated[float | None, typer.Option(
         help="pose goal: older single tolerance, the default of both of the above")] = None,
+    free_axes: Annotated[str | None, typer.Option(
+        help="pose or displacement goal: world axes along which the position is free, e.g. 'x y' (lift by "
+             "dz wherever the lift swings the object sideways)")] = None,
     time_limit: Annotated[float | None, typer.Option(help="seconds for the search")] = None,
     link_replacement: Annotated[bool, typer.Option(
         help="also lay a link an arm let go of flat on a face of a box object again, the other arms "
@@ -632,7 +635,8 @@ def plan(
                  displacement=None if displacement is None else [
                      float(x) for x in _parse_vector(displacement, "displacement")],
                  tolerance=tolerance, position_tolerance=position_tolerance, rotation_tolerance=rot, body=body,
-                 point=None if point is None else [float(x) for x in _parse_vector(point, "point")])
+                 point=None if point is None else [float(x) for x in _parse_vector(point, "point")],
+                 free_axes=None if free_axes is None else free_axes.replace(",", " ").split())
     except ValidationError as e:
         err = e.errors()[0]
         where = ".".join(str(x) for x in err["loc"] if not str(x).startswith(("function-", "literal[")))

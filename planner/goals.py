@@ -58,7 +58,10 @@ class Goal(BaseModel):
       :data:`DEFAULT_ROTATION_TOLERANCE`; ``"free"``: any rotation). ``tolerance`` is the older
       single field: when given it is the default of both (scene units and radians), so goals
       written with it keep working (each error is now compared with it on its own, no longer
-      their Euclidean norm);
+      their Euclidean norm). ``free_axes`` (pose and displacement goals) leaves the object's
+      position free along those world axes (``["x", "y"]``: "lift by dz" wherever the lift swings
+      the box sideways, as two arms hugging it do): the position error and the displacement still
+      to go count the other axes only;
     * ``contact``: the finger link ``body`` touches the object at the world point ``point`` (within
       ``position_tolerance``, default as for a pose) and the contacts hold the object (18): an arm
       moves its contact to a new place, e.g. by sliding it along a face
@@ -77,9 +80,18 @@ class Goal(BaseModel):
     wrenches: list[list[FiniteFloat]] | None = None
     body: str | None = None
     point: list[FiniteFloat] | None = None
+    free_axes: list[Literal["x", "y", "z"]] | None = None
 
     @model_validator(mode="after")
     def _fields_for_type(self) -> Goal:
+        if self.free_axes is not None:
+            if self.type not in ("pose", "displacement"):
+                raise ValueError("free_axes is for goal types 'pose' and 'displacement'")
+            if len(set(self.free_axes)) != len(self.free_axes):
+                raise ValueError(f"free_axes {self.free_axes} names an axis twice")
+            values = self.pose if self.pose is not None else self.displacement
+            if values is not None and len(values) == 3 and "z" in self.free_axes:
+                raise ValueError("free_axes: a 2-D goal has the axes 'x' and 'y' only")
         if self.type == "combination" and self.combination is None:
             raise ValueError("goal type 'combination' needs the field 'combination' (e.g. \"FSDD\")")
         if self.type == "pose" and self.pose is None:
@@ -137,19 +149,26 @@ def pose_errors(goal: Goal, state: GraspState) -> tuple[float, float]:
     the goal's orientation to the state's) of ``state`` against a pose goal."""
     assert goal.pose is not None
     target = Pose.from_vector(goal.pose, state.dim)
-    return (float(np.linalg.norm(state.pose.position - target.position)),
-            state.pose.rotation_angle_to(target))
+    off = (state.pose.position - target.position) * position_mask(goal, state.dim)  # (dim,)
+    return float(np.linalg.norm(off)), state.pose.rotation_angle_to(target)
+
+
+def position_mask(goal: Goal, dim: int) -> Array:
+    """``(dim,)`` 1 for the world axes whose position the goal fixes, 0 for its ``free_axes``."""
+    free = set(goal.free_axes or ())
+    return np.array([0.0 if a in free else 1.0 for a in "xyz"[:dim]])
 
 
 def pose_goal_remaining(goal: Goal, state: GraspState) -> Array:
     """The displacement ``(D,)`` still to go to a pose goal (pose-vector difference; the rotation
-    part zero when the goal leaves the rotation free)."""
+    part zero when the goal leaves the rotation free, the position along its ``free_axes`` zero)."""
     assert goal.pose is not None
     rest = np.asarray(goal.pose, float) - state.pose_vector()
     if state.dim == 2:
         rest[2] = (rest[2] + np.pi) % (2 * np.pi) - np.pi
     if goal.rotation_tol() is None:
         rest[state.dim:] = 0.0
+    rest[: state.dim] *= position_mask(goal, state.dim)
     return rest
 
 

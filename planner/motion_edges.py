@@ -32,7 +32,7 @@ from analysis.exceptions import CTPError, SceneError
 from analysis.pose import Pose
 from analysis.scene import Box, Polygon
 from analysis.torques import torque_set
-from planner.goals import pose_goal_remaining
+from planner.goals import pose_goal_remaining, position_mask
 from planner.manifold import ContactManifold, pose_displacement
 from planner.motion_length import held_length, line_contacts, torque_margins, turned_normals
 from planner.nodes import GraphNodes
@@ -357,7 +357,7 @@ def _direction_candidates(nodes: GraphNodes, state: GraspState, p: Any, dset: tu
         # in its tolerance (a box the arms can lift only while it tips a little: the position
         # first, the rotation within its looser tolerance), then the plain projection
         rot_tol = goal.rotation_tol()
-        w = np.r_[np.full(state.dim, 1.0 / goal.position_tol(nodes.size)),
+        w = np.r_[position_mask(goal, state.dim) / goal.position_tol(nodes.size),
                   np.full(D - state.dim, 0.0 if rot_tol is None else 1.0 / rot_tol)]
         c = np.linalg.lstsq(w[:, None] * Lr, w * rest, rcond=None)[0]
         cands.append(Lr @ c)
@@ -405,13 +405,13 @@ def _goal_lifted_contacts(state: GraspState, fixed: tuple[int, ...], rest: Array
 
 def _goal_distance(nodes: GraphNodes, state: GraspState, dr: Array) -> float:
     """How far along the unit direction ``dr`` ``(D,)`` the pose comes closest to the goal pose
-    (errors in units of their tolerances, the rotation not counted where it is free); 0 when
+    (errors in units of their tolerances, the rotation and the free axes not counted); 0 when
     ``dr`` leads away."""
     goal = nodes.goal
     rest = pose_goal_remaining(goal, state)
     rot_tol = goal.rotation_tol()
     d = state.dim
-    w = np.r_[np.full(d, 1.0 / goal.position_tol(nodes.size)),
+    w = np.r_[position_mask(goal, d) / goal.position_tol(nodes.size),
               np.full(len(dr) - d, 0.0 if rot_tol is None else 1.0 / rot_tol)]
     den = float(np.sum((w * dr) ** 2))
     return max(0.0, float(np.sum(w * w * dr * rest)) / den) if den > 0 else 0.0

@@ -342,7 +342,7 @@ def test_plan_job_without_a_plan_says_found_false_and_why(client: TestClient) ->
 
 def test_plan_goal_tolerances_and_letters_are_validated(client: TestClient) -> None:
     goal = {"type": "pose", "pose": [0.0, 0.55, 0.0]}
-    for field, value in (("position_tolerance", -0.01), ("rotation_tolerance", "loose")):
+    for field, value in (("position_tolerance", -0.01), ("rotation_tolerance", "loose"), ("free_axes", ["up"])):
         r = client.post("/plans", json={"scene": PLANAR, "goal": {**goal, field: value}})
         assert r.status_code == 422 and r.json()["detail"].startswith(f"goal.{field}"), r.text
     # a combination letter that does not fit its contact (N on a contact with friction)

@@ -91,6 +91,10 @@ def test_ctp_plan_bad_tolerances_exit_2() -> None:
     assert r.exit_code == 2 and "goal.position_tolerance" in r.output, r.output
     r = CliRunner().invoke(app, ["plan", str(BOX), "--goal", "combination", "--combination", "FFFFD"])
     assert r.exit_code == 2 and "goal.combination" in r.output and "6 contacts" in r.output, r.output
+    r = CliRunner().invoke(app, [*base, "--free-axes", "x q"])
+    assert r.exit_code == 2 and "goal.free_axes" in r.output and "Traceback" not in r.output, r.output
+    r = CliRunner().invoke(app, ["plan", str(BOX), "--free-axes", "x"])  # the default goal is active
+    assert r.exit_code == 2 and "free_axes is for goal types 'pose' and 'displacement'" in r.output, r.output
 
 
 def test_ctp_plan_and_simulate_document_their_exit_codes() -> None:

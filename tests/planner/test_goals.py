@@ -19,7 +19,7 @@ from analysis.pose import Pose
 from analysis.rotations import rotvec_to_matrix
 from analysis.scene import Scene
 from planner import Goal, plan
-from planner.goals import DEFAULT_POSITION_TOLERANCE, goal_reached, pose_errors
+from planner.goals import DEFAULT_POSITION_TOLERANCE, goal_reached, pose_errors, pose_goal_remaining, position_mask
 from planner.object_motion import keep_contacts
 from planner.plan import START_MEETS_GOAL, Plan
 from planner.state import AnalysisCache, GraspContact, state_from_scene
@@ -154,6 +154,37 @@ def test_pose_tolerances_are_metres_and_radians_apart(box_scene: Scene) -> None:
     assert not reached(position_tolerance=0.021, rotation_tolerance=0.09)  # 0.1 rad off
     assert reached(position_tolerance=0.021, rotation_tolerance="free")
     assert not reached(position_tolerance=0.021)  # default rotation tolerance 0.05 rad
+
+
+def test_free_axes_leave_those_position_errors_out(box_scene: Scene) -> None:
+    hand = HandKinematics.from_scene(box_scene)
+    start = state_from_scene(box_scene, hand)
+    moved = start.with_pose(Pose(start.position + np.array([0.02, -0.01, 0.03]), start.rotation, 3))
+    target = [float(x) for x in start.pose_vector()]
+    target[2] += 0.03  # lifted 3 cm, not moved sideways
+    goal = Goal(type="pose", pose=target, position_tolerance=0.005)
+    assert pose_errors(goal, moved)[0] == pytest.approx(np.hypot(0.02, 0.01), abs=1e-12)
+    free = goal.model_copy(update={"free_axes": ["x", "y"]})
+    assert pose_errors(free, moved)[0] == pytest.approx(0.0, abs=1e-12)
+    assert not _reached(box_scene, goal, moved) and _reached(box_scene, free, moved)
+    rest = pose_goal_remaining(free, start)  # (6,): only z still to go
+    np.testing.assert_allclose(rest, [0.0, 0.0, 0.03, 0.0, 0.0, 0.0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(position_mask(free, 3), [0.0, 0.0, 1.0])
+    assert Goal.model_validate(free.model_dump(exclude_none=True)) == free
+
+
+@pytest.mark.parametrize(("fields", "match"), [
+    ({"type": "active", "free_axes": ["x"]}, "for goal types 'pose' and 'displacement'"),
+    ({"type": "pose", "pose": [0.0, 0.0, 0.3, 0, 0, 0], "free_axes": ["x", "x"]}, "names an axis twice"),
+    ({"type": "pose", "pose": [0.0, 0.5, 0.0], "free_axes": ["z"]}, "'x' and 'y' only"),
+    ({"type": "displacement", "displacement": [0.1, 0.0, 0.0], "free_axes": ["y", "z"]}, "'x' and 'y' only"),
+])
+def test_bad_free_axes_are_refused_with_the_reason(fields: dict[str, object], match: str) -> None:
+    with pytest.raises(ValidationError, match=match):
+        Goal.model_validate(fields)
+    with pytest.raises(ValidationError) as e:
+        Goal.model_validate({"type": "pose", "pose": [0.0, 0.5, 0.0], "free_axes": ["w"]})
+    assert e.value.errors()[0]["loc"][:1] == ("free_axes",)
 
 
 def test_pose_goal_json_stays_backward_compatible() -> None:
