@@ -354,7 +354,7 @@ class DAFCOracle:
                 else:
                     ang = 2 * np.pi * np.arange(k_sides) / k_sides
                     dirs = [np.cos(a) * T[0] + np.sin(a) * T[1] for a in ang]
-                    mu = sy.mu[i] / np.cos(np.pi / k_sides)
+                    mu = sy.mu[i]  # sides at distance mu n: the k-gon circumscribing the disc
                 for c in dirs:
                     r = np.zeros(n_var)
                     r[cols] = c
@@ -1157,7 +1157,7 @@ def _relaxed_box_model(oracle: DAFCOracle, fixed_G: Array, dep: list[int], box: 
         first = L_c + len(cols)
         h = sector_half(sec)
         if sec is None:
-            r_mu = mu if d == 2 else mu / np.cos(np.pi / SECTOR_FREE_SIDES)
+            r_mu = mu  # sides at distance mu n: the k-gon circumscribing the disc
             for j in range(d - 1):
                 cols.append(sy.G_blocks[i] @ T[j])
             vals = np.empty((free_dirs.shape[0], d))

@@ -566,6 +566,29 @@ def test_slip_sector_bounds_reused_from_certified_optima_match_scipy() -> None:
     assert certified > 5 and oracle.box_vertex_hits > 5
 
 
+def test_a_free_s_points_relaxed_friction_is_the_polygon_circumscribing_its_disc() -> None:
+    """Known gap 8 (fixed): the sector search's root box bounds a free S-point's friction by the
+    k-gon whose sides touch the friction circle |t| = mu n (unit side normals c_j, c_j^T t <= mu n),
+    not by one 1/cos(pi/k) larger. Every point of the circle is inside, and each side touches it."""
+    from analysis.dafc import _relaxed_box_model
+
+    system = example_system("sphere_four_finger_wrap")
+    oracle = _oracle(system, "SFFFSSDFS")
+    dep = list(range(len(oracle.sel.s_index)))
+    model, _, slots = _relaxed_box_model(oracle, oracle.st.G_c, dep, tuple(None for _ in dep))
+    for k, cols in enumerate(slots):
+        i = oracle.sel.s_index[k]
+        n_col, mu = oracle.sel.c_slices[i].start, float(system.mu[i])
+        rows = model.A_ub[np.flatnonzero(np.abs(model.A_ub[:, list(cols)]).sum(axis=1) > 0)]
+        C = rows[:, list(cols)]  # (k, 2) side normals in tangent coordinates
+        assert len(C) == 8
+        np.testing.assert_allclose(np.linalg.norm(C, axis=1), 1.0, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(rows[:, n_col], -mu, rtol=0, atol=1e-15)  # c_j^T t <= mu n
+        circle = mu * np.array([[np.cos(a), np.sin(a)] for a in np.linspace(0, 2 * np.pi, 721)])  # n = 1
+        assert np.max(circle @ C.T) <= mu + 1e-12  # the disc is inside
+        np.testing.assert_allclose(np.max((mu * C) @ C.T, axis=1), mu, rtol=0, atol=1e-12)  # each side touches it
+
+
 def _cone_motions(oracle: DAFCOracle, box: tuple, draws: int, rng: np.random.Generator) -> np.ndarray:
     """Motions ``dzeta_c`` of a sector box's cone (``B dzeta_c <= 0``, every S-point's slip in its
     sector), found without cdd: maximisers of seeded random objectives over the cone cut by the
