@@ -68,8 +68,10 @@ def test_a_graceful_stop_requeues_at_once(tmp_path: Path) -> None:
     port = free_port()
     server = start_server(tmp_path, port, CTP_JOB_LEASE_SECONDS="30")
     base = f"http://127.0.0.1:{port}"
-    palm = example("sphere_four_finger_palm")
-    urls = [httpx.post(f"{base}/enumerations", json={"scene": palm}, timeout=30).json()["url"] for _ in range(2)]
+    # the wrap's 19,683 combinations (seconds): the palm's 243 could finish between the poll that saw
+    # the job running and the stop (it did on a fast machine: 'succeeded' before the stop took effect)
+    wrap = example("sphere_four_finger_wrap")
+    urls = [httpx.post(f"{base}/enumerations", json={"scene": wrap}, timeout=30).json()["url"] for _ in range(2)]
     deadline = time.monotonic() + 60
     while httpx.get(base + urls[0], timeout=10).json()["status"] != "running":
         assert time.monotonic() < deadline
