@@ -21,6 +21,9 @@ light requests of ``benchmarks/service.py --scenario mixed``, which by Little's 
 
 from __future__ import annotations
 
+from machine import machine  # first: it pins the BLAS kernel before numpy loads (analysis/blas.py)
+
+# isort: split
 import argparse
 import os
 import resource
@@ -33,8 +36,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-
-from machine import machine  # noqa: E402
 
 from analysis.combination import analyze_combination  # noqa: E402
 from analysis.contacts import build_system  # noqa: E402

@@ -20,6 +20,9 @@ The targets of the issue: detection on the two-arm robot with URDF collision geo
 
 from __future__ import annotations
 
+from machine import machine  # first: it pins the BLAS kernel before numpy loads (analysis/blas.py)
+
+# isort: split
 import argparse
 import copy
 import functools
@@ -34,8 +37,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-
-from machine import machine  # noqa: E402
 
 from analysis.detect import Detection, UnplacedScene, detect_contacts  # noqa: E402
 from analysis.placement import Placement, placed_scene_data  # noqa: E402

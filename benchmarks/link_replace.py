@@ -13,6 +13,9 @@ two steps are re-checked by :func:`planner.verify.verify_plan`. Times are the pr
 
 from __future__ import annotations
 
+from machine import machine  # first: it pins the BLAS kernel before numpy loads (analysis/blas.py)
+
+# isort: split
 import argparse
 import json
 import os
@@ -25,8 +28,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
-
-from machine import machine  # noqa: E402
 
 from analysis.kinematics import HandKinematics  # noqa: E402
 from analysis.loader import load_scene  # noqa: E402

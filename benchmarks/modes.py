@@ -16,10 +16,12 @@ near 1, independent of ``2^L``).
 
 from __future__ import annotations
 
+from machine import machine  # first: it pins the BLAS kernel before numpy loads (analysis/blas.py)
+
+# isort: split
 import argparse
 import importlib.metadata
 import json
-import os
 import platform
 import subprocess
 import sys
@@ -151,8 +153,7 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="smaller synthetic families")
     args = ap.parse_args()
 
-    cpu = platform.processor() or platform.machine()
-    print("machine:", platform.platform(), "|", cpu, "|", f"cpus={os.cpu_count()}")
+    print("machine:", machine())
     hv = importlib.metadata.version("highspy")
     print("python", platform.python_version(), "| numpy", np.__version__, "| highspy", hv)
     print(f"max_modes={args.max_modes} (listing cap for sticking/sliding modes; '+' = capped)\n")
