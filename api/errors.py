@@ -62,7 +62,7 @@ def _items(errors: Any) -> list[dict[str, Any]]:
     out = []
     for e in errors:
         loc = _clean(e.get("loc", ()))
-        msg = str(e.get("msg", ""))
+        msg = str(e.get("msg", "")).removeprefix("Value error, ")  # pydantic's prefix of a validator's own words
         out.append({"loc": loc, "msg": msg, "type": str(e.get("type", "value_error"))})
     return out
 

@@ -349,6 +349,10 @@ def test_plan_goal_tolerances_and_letters_are_validated(client: TestClient) -> N
     r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "combination", "combination": "NFFFD"}})
     assert r.status_code == 422 and r.json()["detail"].startswith("goal.combination"), r.text
     assert "letter 0 is N" in r.json()["detail"]
+    # a model validator's own words, without pydantic's "Value error, " prefix
+    r = client.post("/plans", json={"scene": PLANAR, "goal": {"type": "active", "free_axes": ["x"]}})
+    assert r.status_code == 422, r.text
+    assert r.json()["detail"] == "goal: free_axes is for goal types 'pose' and 'displacement'", r.text
 
 
 # -- limits, cancellation, recovery (an app with tight limits) ---------------------------------
