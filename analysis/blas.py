@@ -4,14 +4,15 @@ numpy's and scipy's OpenBLAS pick their kernels at load time from the CPU (``DYN
 AVX-512 machine (e.g. AMD Zen 4) the ``SkylakeX`` kernels, on others ``Haswell`` or ``Zen``. The
 kernels round differently in the last bits, and where a result is not unique, the basis of a null
 space of dimension > 1 (:func:`analysis.linalg.null_space`), the first of several equal members,
-the cheaper of two plans of nearly equal cost, those bits choose it. On a Zen 4 machine the palm's
-FFFFF row printed the example direction ``-e_6`` where a Zen 3 machine prints ``+e_6``, and the
-nine-contact wrap planned a different lift (its replay 7.3 % off the plan instead of within 5 %).
+the cheaper of two plans of nearly equal cost, those bits choose it. On an AVX-512 machine the
+palm's FFFFF row printed the example direction ``-e_6`` where the machines before printed ``+e_6``,
+and the nine-contact wrap planned a different lift (its replay 7.3 % off the plan, not within 5 %).
 
 :func:`pin_kernel` sets ``OPENBLAS_CORETYPE`` to :data:`KERNEL` (AVX2, every x86-64 CPU since 2013)
 unless the user set it; it must run before numpy is first imported, so every package of the
-project (``analysis``, ``planner``, ``sim``, ``api``, ``ctp``) calls it first, and ``make`` exports the
-variable as well. :func:`kernels` says which kernels the loaded libraries use.
+project (``analysis``, ``planner``, ``sim``, ``api``, ``ctp``) calls it first (and ``benchmarks/machine.py``
+for the benchmarks); child processes (the enumeration's workers, Ray's) inherit the variable.
+:func:`kernels` says which kernels the loaded libraries use.
 """
 
 from __future__ import annotations
