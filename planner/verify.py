@@ -28,6 +28,8 @@ contact point lies on its body and on the object) and:
   after the step has the rolled contact (:func:`_link_rolling_problems`); and densely
   (waypoints at most ``DENSE_STEP`` apart), at every waypoint, the object penetrates no fixed
   body and no link penetrates the object, a fixed body or another link;
+* every step: its torque and its holding torque within the joints' limits
+  (:func:`_torque_limit_problems`);
 * ``slide`` (33 with one S-point, the object still): densely, the sliding contact's gap and face,
   the kept contacts, the path's clearance, and at every waypoint the holding contacts' stationary
   grasp (18) and eq. (33) with the sliding contact's kinetic friction (:func:`_slide_problems`);
@@ -52,6 +54,7 @@ from analysis.pose import Pose
 from analysis.regrasp import sliding_equilibrium
 from analysis.rotations import matrix_to_rotvec
 from analysis.scene import Box, Cylinder, Disk, Scene, Sphere
+from analysis.torque_limits import LIMIT_TOL, hand_torque_limits, over_limit
 from analysis.torques import torque_set
 from planner.collision import DENSE_STEP, PENETRATION_TOL, CollisionModel, path_clearance_certified
 from planner.link_release import OVERLAP_SLACK, ROUNDING
@@ -84,6 +87,7 @@ def verify_step(scene: Scene, hand: HandKinematics, step: PlanStep) -> list[str]
         return [f"{tag}: state is not a valid scene: {e}"]
     if after.stationary(all_f(step.after)) is None:
         problems.append(f"{tag}: the grasp after the step has no stationary grasp (18)")
+    problems.extend(_torque_limit_problems(scene, hand, step, tag))
     if t.kind == "release":
         if before.stationary(t.combination) is None:
             problems.append(f"{tag}: no stationary grasp (18) of the remaining contacts")
@@ -601,6 +605,23 @@ def _link_rolling_problems(scene: Scene, hand: HandKinematics, step: PlanStep, t
 #: a step starts where the one before it ended, joints (rad or scene units) and object pose, within
 #: this (plan files round paths to 1e-10)
 CHAIN_TOL = 1e-6
+
+
+def _torque_limit_problems(scene: Scene, hand: HandKinematics, step: PlanStep, tag: str) -> list[str]:
+    """The step's torques within the joints' limits (the URDF effort limits and the scene's
+    ``tau_max``, :func:`analysis.torque_limits.hand_torque_limits`) to ``LIMIT_TOL``: the chosen
+    torque ``tau`` (object motions: a member of T, 32) and the holding torque ``tau_st`` (18)."""
+    limits = hand_torque_limits(scene, hand)  # (M,) or None
+    if limits is None:
+        return []
+    out = []
+    for name, tau in (("torque", step.transition.tau), ("holding torque (18)", step.transition.tau_stationary)):
+        if tau is None:
+            continue
+        for j in over_limit(np.asarray(tau, dtype=float), limits, LIMIT_TOL):
+            out.append(f"{tag}: the {name} of joint {hand.joint_labels()[j]} is {float(tau[j]):.4g} N m, over its "
+                       f"limit {float(limits[j]):.4g} N m")
+    return out
 
 
 def verify_plan(scene: Scene, plan: Plan) -> list[str]:

@@ -16,6 +16,7 @@ some links of one finger).
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ from analysis.geometry import object_signed_distance
 from analysis.kinematics import HandKinematics
 from analysis.loader import check_geometry, load_scene
 from analysis.scene import Scene
+from analysis.torque_limits import hand_torque_limits
 from planner import Goal, plan
 from planner.link_release import link_release_edges, minimal_motion
 from planner.nodes import GraphNodes
@@ -114,6 +116,21 @@ def test_allegro_urdf_thumb_releases_one_of_its_two_contacts_to_active_closure()
     assert len(released) == 1 and released[0] in thumb  # one of the thumb's two, the other kept
     assert sum(b.startswith("thumb/") for b in t.contacts_after) == 1
     assert verify_plan(scene, p) == []
+    # verify_plan checks every step's torques against the URDF's effort limits: a holding torque
+    # 1.5 times over one joint's limit is reported, naming the joint and both figures
+    hand = HandKinematics.from_scene(scene)
+    limits = hand_torque_limits(scene, hand)
+    assert limits is not None and t.tau_stationary is not None
+    j = int(np.argmax(np.isfinite(limits)))
+    tau = t.tau_stationary.copy()
+    tau[j] = 1.5 * limits[j]
+    bad = dataclasses.replace(p, steps=(dataclasses.replace(p.steps[0], transition=dataclasses.replace(
+        t, tau_stationary=tau)),))
+    problems = verify_plan(scene, bad)
+    assert len(problems) == 1, problems
+    label = hand.joint_labels()[j]
+    said = f"holding torque (18) of joint {label} is {1.5 * limits[j]:.4g} N m, over its limit {limits[j]:.4g}"
+    assert said in problems[0], problems
 
 
 def test_minimal_motion_keeps_the_contact_motion_with_least_norm(baxter: Scene) -> None:
