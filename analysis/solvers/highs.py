@@ -350,8 +350,8 @@ class LPModel:
         rows = np.vstack([A, -A[m_ub:], -eye[lo], eye[hi]])  # (m + m_eq + |lo| + |hi|, n)
         upper = np.concatenate([self.b_ub, self.b_eq, -self.b_eq, -self.lb[lo], self.ub[hi]])
         h = _load(np.hstack([rows, -np.ones((rows.shape[0], 1))]), np.full(len(upper), -INF), upper,
-                  np.full(n + 1, -INF), np.r_[np.full(n, INF), INF], {}, "violation model could not be loaded")
-        h.changeColBounds(n, 0.0, INF)  # t >= 0
+                  np.r_[np.full(n, -INF), 0.0], np.full(n + 1, INF), {},  # t >= 0
+                  "violation model could not be loaded")
         h.changeColCost(n, 1.0)
         h.run()
         if h.getModelStatus() != _OPTIMAL:
