@@ -37,11 +37,42 @@ from analysis.torque_limits import LIMIT_TOL
 CLASS = {"F": 2, "S": 1, "N": 1, "D": 0}
 
 
+_CLASS_OF_BYTE = np.full(256, -1, dtype=np.int8)  # CLASS by the letter's byte, -1 elsewhere
+for _letter, _class in CLASS.items():
+    _CLASS_OF_BYTE[ord(_letter)] = _class
+
+
 def classes(combinations: list[str]) -> NDArray[np.int8]:
-    """``(R, L)`` force classes of the combinations."""
+    """``(R, L)`` force classes of the combinations (read as bytes at once where they are
+    letters of one length)."""
     if not combinations:
         return np.zeros((0, 0), dtype=np.int8)
+    L = len(combinations[0])
+    if all(len(c) == L for c in combinations):
+        try:
+            raw = np.frombuffer("".join(combinations).encode("ascii"), dtype=np.uint8).reshape(-1, L)
+        except UnicodeEncodeError:
+            raw = None
+        if raw is not None:
+            out = _CLASS_OF_BYTE[raw]
+            if not np.any(out < 0):
+                return out
     return np.array([[CLASS[s] for s in c] for c in combinations], dtype=np.int8)
+
+
+def _masks(cls: NDArray[np.int8]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Bit masks ``(R,)`` of the contacts of class 2 (F) and of class at least 1 (F, S, N) of
+    each row of ``cls`` ``(R, L)``: a row's classes are at most another's, contact by contact,
+    exactly when both its masks are subsets of the other's."""
+    bits = np.int64(1) << np.arange(cls.shape[1], dtype=np.int64)  # (L,)
+    return (cls == 2) @ bits, (cls >= 1) @ bits
+
+
+def _at_most(Fm: NDArray[np.int64], Sm: NDArray[np.int64], F_top: int | NDArray[np.int64],
+             S_top: int | NDArray[np.int64]) -> NDArray[np.bool_]:
+    """Are the classes of the masks ``Fm``, ``Sm`` (:func:`_masks`) at most those of ``F_top``,
+    ``S_top``, contact by contact (elementwise, broadcast)?"""
+    return ((Fm & ~F_top) | (Sm & ~S_top)) == 0
 
 
 @dataclass(frozen=True)
@@ -142,12 +173,13 @@ def stationary_verdicts(system: GraspSystem, combinations: list[str],
     marked), else that bound. ``progress(k)`` is called with the LPs solved so far."""
     R = len(combinations)
     cls = classes(combinations)  # (R, L)
+    Fm, Sm = _masks(cls) if R else (np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))  # (R,), (R,)
     status = np.zeros(R, dtype=np.int8)  # 0 undecided, 1 feasible, -1 infeasible
     violation = np.full(R, np.nan)
     own = np.zeros(R, dtype=bool)  # decided by its own LP
     infeasible_rows: list[int] = []
     lps = 0
-    order = sorted(range(R), key=lambda r: -int(cls[r].sum())) if R else []
+    order = np.argsort(-cls.sum(axis=1, dtype=np.int64), kind="stable").tolist() if R else []
     for r in order:
         if status[r]:
             continue
@@ -162,12 +194,13 @@ def stationary_verdicts(system: GraspSystem, combinations: list[str],
             violation[r] = _violation(stationary_violation(system, st, fs))
             lps += 1
             infeasible_rows.append(r)
-            weaker = open_[np.all(cls[open_] <= cls[r], axis=1)]
+            weaker = open_[_at_most(Fm[open_], Sm[open_], int(Fm[r]), int(Sm[r]))]
             status[weaker] = -1
         else:
             status[r] = 1
             wit = _Witness.of(system, contact_forces(system, sel, found[1]))
-            fits = open_[np.all(cls[open_] >= wit.classes, axis=1)]
+            wF, wS = _masks(wit.classes[None, :])
+            fits = open_[_at_most(wF, wS, Fm[open_], Sm[open_])]  # classes at least the witness's
             fits = fits[fits != r]
             status[fits[wit.certifies(system, cls[fits])]] = 1
         if progress is not None:
@@ -178,7 +211,7 @@ def stationary_verdicts(system: GraspSystem, combinations: list[str],
     bound = np.full(pruned.size, -np.inf)
     for r in infeasible_rows:
         v = violation[r]
-        dom = np.all(cls[pruned] <= cls[r], axis=1)
+        dom = _at_most(Fm[pruned], Sm[pruned], int(Fm[r]), int(Sm[r]))
         bound[dom] = np.maximum(bound[dom], np.inf if np.isnan(v) else v)
     for k, row in enumerate(pruned.tolist()):
         if bound[k] > DEGENERATE_TOL:
