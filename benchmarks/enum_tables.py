@@ -1,6 +1,6 @@
 """Whole enumeration tables of example scenes, dumped for before/after comparisons, with CPU seconds.
 
-    .venv/bin/python benchmarks/enum_tables.py --out /tmp/tables.json [--workers 1] [--symmetric-empty] [scene ...]
+    .venv/bin/python benchmarks/enum_tables.py --out /tmp/tables.json [--workers 1] [--no-symmetric-empty] [scene ...]
     .venv/bin/python benchmarks/enum_tables.py --compare /tmp/before.json /tmp/after.json
 
 Each row: combination, verdict, DAFC dimension, exactness, reason (and a, a~, dim DPFC). The
@@ -35,7 +35,7 @@ def cpu_seconds() -> float:
     return me.ru_utime + me.ru_stime + kids.ru_utime + kids.ru_stime
 
 
-def dump(scenes: list[str], workers: int, symmetric_empty: bool = False) -> dict[str, object]:
+def dump(scenes: list[str], workers: int, symmetric_empty: bool = True) -> dict[str, object]:
     out: dict[str, object] = {"machine": machine()}
     for name in scenes:
         sy = build_system(load_scene(ROOT / "examples" / f"{name}.json"))
@@ -77,8 +77,9 @@ def main() -> None:
     ap.add_argument("--out")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--compare", nargs=2)
-    ap.add_argument("--symmetric-empty", action="store_true",
-                    help="proven emptiness carried to symmetric rows (enumerate_combinations(symmetric_empty=True))")
+    ap.add_argument("--no-symmetric-empty", dest="symmetric_empty", action="store_false",
+                    help="every row its own DAFC search: no proven emptiness carried to symmetric rows "
+                         "(enumerate_combinations(symmetric_empty=False))")
     args = ap.parse_args()
     if args.compare:
         before, after = (json.loads(Path(p).read_text()) for p in args.compare)

@@ -15,7 +15,7 @@ from scipy.linalg import null_space
 from analysis.combination import CombinationParts, CombinationSummary, summarize, summarize_with_member
 from analysis.contacts import all_combinations
 from analysis.dafc_family import FamilyKinematics, MemberCertificate, members_at
-from analysis.enumerate import enumerate_combinations
+from analysis.enumerate import _digits, _order, enumerate_combinations
 
 
 def _same(a: CombinationSummary, b: CombinationSummary) -> None:
@@ -195,3 +195,20 @@ def test_batched_force_lps_agree_with_each_combinations_oracle(name: str, source
             both += 1
             assert got.check(kin, list(got.family(system))).all() if list(got.family(system)) else True
     assert both > 0 and both < len(rows)  # members and non-members among them
+
+
+def test_order_is_strongest_first_and_stable() -> None:
+    """``_order`` (letters read as bytes) is the stable sort by the sum of the classes, strongest
+    first, also for N letters and for rows of different lengths (the letter-by-letter path)."""
+    rng = np.random.default_rng(3)
+    rows = ["".join(rng.choice(list("FSND"), size=6)) for _ in range(500)]
+    want = sorted(rows, key=lambda c: -sum({"F": 2, "S": 1, "N": 1, "D": 0}[s] for s in c))
+    assert _order(rows) == want
+    assert _order(["D", "FS", "SS", "F"]) == ["FS", "SS", "F", "D"]
+    assert _order([]) == []
+
+
+def test_digits_known_answer() -> None:
+    np.testing.assert_array_equal(_digits(["FSND", "DDFF"], 4), [[0, 1, 1, 2], [2, 2, 0, 0]])
+    assert _digits(["FXDD"], 4) is None  # not a letter of a contact state
+    assert _digits([], 3).shape == (0, 3)

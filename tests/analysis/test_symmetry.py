@@ -16,8 +16,11 @@ import analysis.enumerate as enumerate_module
 from analysis.combination import CombinationParts, summarize_with_member
 from analysis.contacts import system_from_arrays
 from analysis.dafc_family import FamilyKinematics, members_at, slip_depends_on_redundancy
-from analysis.enumerate import enumerate_combinations
+from analysis.enumerate import enumerate_combinations, parse_where
 from analysis.symmetry import Symmetry, symmetries, twist_map
+
+#: test_emptiness_carried_on_the_twelve_contact_wrap: the rows with at least this many D-points
+WHERE_D12 = 6
 
 
 @pytest.mark.parametrize(("name", "count"), [("sphere_four_finger_wrap", 7), ("sphere_four_finger_palm", 7),
@@ -143,7 +146,7 @@ def test_emptiness_carried_by_symmetries_is_each_rows_own_verdict(name: str) -> 
     their own search (the table without the option), and some rows were decided that way."""
     sy = example_system(name)
     carried, st = enumerate_combinations(sy, workers=1, symmetric_empty=True)
-    own, st0 = enumerate_combinations(sy, workers=1)
+    own, st0 = enumerate_combinations(sy, workers=1, symmetric_empty=False)
     assert st.dafc_mirrored_empty > 0 and st0.dafc_mirrored_empty == 0
     assert st.dafc_searched + st.dafc_mirrored_empty <= st0.dafc_searched
     assert all(g.residual <= 1e-9 for g in symmetries(sy))
@@ -156,10 +159,28 @@ def test_emptiness_carried_by_symmetries_on_the_wrap() -> None:
     """The same on the nine-contact wrap (19,683 rows, about 240 carried)."""
     sy = example_system("sphere_four_finger_wrap")
     carried, st = enumerate_combinations(sy, workers=1, symmetric_empty=True)
-    own, _ = enumerate_combinations(sy, workers=1)
+    own, _ = enumerate_combinations(sy, workers=1, symmetric_empty=False)
     assert st.dafc_mirrored_empty > 100
     assert [(r.combination, r.feasible, r.reason, r.dim_dafc, r.exact) for r in carried] == [
         (r.combination, r.feasible, r.reason, r.dim_dafc, r.exact) for r in own]
+
+
+@pytest.mark.slow
+def test_emptiness_carried_on_the_twelve_contact_wrap() -> None:
+    """The same on the 12-contact wrap, on its rows with at least WHERE_D12 D-points (a set the
+    symmetries map onto itself, so whole orbits): carrying emptiness (the default) gives the
+    table of every row's own search, example motions included."""
+    sy = example_system("sphere_wrap_three_link")
+    where = parse_where(f"D>={WHERE_D12}")
+    carried, st = enumerate_combinations(sy, workers=2, where=where)
+    own, st0 = enumerate_combinations(sy, workers=2, where=where, symmetric_empty=False)
+    assert st.dafc_mirrored_empty > 300 and st0.dafc_mirrored_empty == 0  # 413 of its 94,449 rows
+    assert st.dafc_searched + st.dafc_mirrored_empty <= st0.dafc_searched
+    for a, b in zip(carried, own, strict=True):
+        assert (a.combination, a.feasible, a.reason, a.a, a.a_bar, a.dim_dafc, a.dim_dpfc, a.exact) == (
+            b.combination, b.feasible, b.reason, b.a, b.a_bar, b.dim_dafc, b.dim_dpfc, b.exact)
+        if a.example_motion is not None:
+            np.testing.assert_array_equal(a.example_motion, b.example_motion)
 
 
 def test_a_broken_symmetry_carries_motions_but_no_emptiness() -> None:
