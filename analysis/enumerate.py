@@ -99,20 +99,20 @@ class EnumerationStats:
 def _order(combos: Iterable[str]) -> list[str]:
     """Strongest combinations first (stable), so infeasibility and members propagate downwards."""
     combos = list(combos)
-    if not combos or any(len(c) != len(combos[0]) for c in combos):
-        return sorted(combos, key=lambda c: -sum(CLASS[s] for s in c))
-    digits = _digits(combos, len(combos[0]))
-    if digits is None:
+    digits = _digits(combos, len(combos[0])) if combos else None
+    if digits is None:  # rows of different lengths or other letters: letter by letter
         return sorted(combos, key=lambda c: -sum(CLASS[s] for s in c))
     level = np.sum(2 - digits, axis=1)  # the sum of the classes (F 2, S/N 1, D 0)
     return [combos[k] for k in np.argsort(-level, kind="stable").tolist()]
 
 
 def _digits(rows: list[str], L: int) -> NDArray[np.int64] | None:
-    """The base-3 digits ``(R, L)`` (F 0, S/N 1, D 2) of ``rows``, each ``L`` letters, read as
-    bytes at once; None when a row has another letter."""
+    """The base-3 digits ``(R, L)`` (F 0, S/N 1, D 2) of ``rows``, read as bytes at once; None
+    when a row is not ``L`` letters F, S, N or D."""
     if not rows:
         return np.zeros((0, L), dtype=np.int64)
+    if any(len(c) != L for c in rows):
+        return None
     try:
         raw = np.frombuffer("".join(rows).encode("ascii"), dtype=np.uint8).reshape(len(rows), L)
     except (UnicodeEncodeError, ValueError):

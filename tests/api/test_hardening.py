@@ -55,12 +55,18 @@ def assert_no_server_path(text: str) -> None:
 # -- scene files: one parser with limits ---------------------------------------------------------
 
 
-@pytest.fixture(scope="module")
-def limited(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
-    app = create_app(settings_for(tmp_path_factory.mktemp("limited"), max_contacts=9, request_time_limit=6.0,
-                                  max_joints=300, max_body_bytes=1_000_000))
+def _limited_client(tmp_path_factory: pytest.TempPathFactory, max_contacts: int) -> Iterator[TestClient]:
+    """A service with a 6 s request time limit, 300 joints, 1 MB bodies and tables of up to
+    ``max_contacts`` contacts."""
+    app = create_app(settings_for(tmp_path_factory.mktemp(f"limited{max_contacts}"), max_contacts=max_contacts,
+                                  request_time_limit=6.0, max_joints=300, max_body_bytes=1_000_000))
     with TestClient(app) as c:
         yield c
+
+
+@pytest.fixture(scope="module")
+def limited(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
+    yield from _limited_client(tmp_path_factory, 9)
 
 
 def test_alias_bomb_upload_is_4xx_fast_and_small(client: TestClient) -> None:
@@ -299,10 +305,7 @@ def test_repeated_analysis_is_answered_from_the_cache(client: TestClient) -> Non
 @pytest.fixture(scope="module")
 def limited_twelve(tmp_path_factory: pytest.TempPathFactory) -> Iterator[TestClient]:
     """:func:`limited` with tables of up to 12 contacts."""
-    app = create_app(settings_for(tmp_path_factory.mktemp("limited12"), max_contacts=12, request_time_limit=6.0,
-                                  max_joints=300, max_body_bytes=1_000_000))
-    with TestClient(app) as c:
-        yield c
+    yield from _limited_client(tmp_path_factory, 12)
 
 
 def test_light_requests_do_not_wait_behind_heavy_ones(limited_twelve: TestClient) -> None:
