@@ -276,6 +276,32 @@ def all_combinations(system: GraspSystem) -> list[str]:
     return ["".join(p) for p in itertools.product(*letters)]
 
 
+#: Base-3 code of each letter (F 0, S/N 1, D 2; the force class is 2 minus it), by byte; -1 elsewhere.
+_LETTER_CODE = np.full(256, -1, dtype=np.intp)
+for _letter, _code in {"F": 0, "S": 1, "N": 1, "D": 2}.items():
+    _LETTER_CODE[ord(_letter)] = _code
+
+
+def letter_codes(combinations: list[str], L: int) -> NDArray[np.intp]:
+    """``(R, L)`` codes of the combinations' letters (F 0, S/N 1, D 2), read as bytes at once.
+
+    Raise ``ValueError`` naming the first combination that is not ``L`` letters F, S, N or D."""
+    if not combinations:
+        return np.zeros((0, L), dtype=np.intp)
+    for c in combinations:
+        if len(c) != L:
+            raise ValueError(f"combination {c!r} has {len(c)} letters, not {L}")
+    try:
+        raw = np.frombuffer("".join(combinations).encode("ascii"), dtype=np.uint8).reshape(len(combinations), L)
+    except UnicodeEncodeError:
+        raw = None
+    out = _LETTER_CODE[raw] if raw is not None else None
+    if out is None or bool(np.any(out < 0)):
+        bad = next(c for c in combinations if any(x not in "FSND" for x in c))
+        raise ValueError(f"combination {bad!r} has a letter other than F, S, N, D")
+    return out
+
+
 @dataclass(frozen=True)
 class Selection:
     """Selection matrices of one combination (eq. 3) and the blocks they pick.

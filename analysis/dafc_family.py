@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 
 from analysis._types import Array
 from analysis.combination import CombinationParts
-from analysis.contacts import GraspSystem, selection
+from analysis.contacts import GraspSystem, letter_codes, selection
 from analysis.dafc import ALLOW_TOL, SLIP_TOL, DirectionTest
 from analysis.friction import kinetic_friction
 from analysis.linalg import RANK_RTOL, null_space
@@ -275,8 +275,7 @@ class FamilyKinematics:
         R, L = len(combinations), sy.L
         if R == 0:
             return np.zeros(0, dtype=bool)
-        code = {"F": 0, "S": 1, "N": 1, "D": 2}
-        letters = np.array([[code[s] for s in c] for c in combinations], dtype=np.intp).reshape(R, L)
+        letters = letter_codes(combinations, L)  # (R, L)
         is_d = letters == 2  # (R, L)
         size = np.linalg.norm(motions, axis=1)  # (R,)
         vals = motions @ self.normal_rows.T  # (R, L) normal velocities
@@ -498,8 +497,7 @@ def members_at(kin: FamilyKinematics, pairs: list[tuple[str, Array]]) -> list[Me
     if B == 0:
         return []
     F0 = sc.force
-    code = {"F": 0, "S": 1, "N": 1, "D": 2}
-    letters = np.array([[code[s] for s in c] for c, _ in pairs], dtype=np.intp)  # (B, L)
+    letters = letter_codes([c for c, _ in pairs], sy.L)  # (B, L)
     Vt, rank = _padded_null_spaces(kin.A, kin.normal_rows, letters, d, n)  # (B, n, n), (B,)
     null_rows = np.arange(n)[None, :] >= rank[:, None]  # (B, n) rows of Vt spanning null(A_c)
     obj = Vt[:, :, M:] * null_rows[:, :, None]  # (B, n, D) rows: the object parts of null(A_c)
@@ -638,8 +636,7 @@ def probe_motions(kin: FamilyKinematics, combinations: list[str]) -> list[list[A
     n = M + D
     if not combinations:
         return []
-    code = {"F": 0, "S": 1, "N": 1, "D": 2}
-    letters = np.array([[code[s] for s in c] for c in combinations], dtype=np.intp)  # (B, L)
+    letters = letter_codes(combinations, sy.L)  # (B, L)
     Vt, rank = _padded_null_spaces(kin.A, kin.normal_rows, letters, d, n)  # (B, n, n), (B,)
     w = sy.w_ex / max(_norm(sy.w_ex), 1e-300)
     out: list[list[Array]] = []

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 
 from analysis._types import Array
 from analysis.combination import CombinationParts, CombinationSummary, no_grasp_reason, summarize_with_member
-from analysis.contacts import GraspSystem, selection
+from analysis.contacts import GraspSystem, letter_codes, selection
 from analysis.dafc import allowable_cone
 from analysis.dafc_family import (
     FamilyKinematics,
@@ -99,26 +99,10 @@ class EnumerationStats:
 def _order(combos: Iterable[str]) -> list[str]:
     """Strongest combinations first (stable), so infeasibility and members propagate downwards."""
     combos = list(combos)
-    digits = _digits(combos, len(combos[0])) if combos else None
-    if digits is None:  # rows of different lengths or other letters: letter by letter
+    if not combos or any(len(c) != len(combos[0]) for c in combos):  # letter by letter
         return sorted(combos, key=lambda c: -sum(CLASS[s] for s in c))
-    level = np.sum(2 - digits, axis=1)  # the sum of the classes (F 2, S/N 1, D 0)
+    level = np.sum(2 - letter_codes(combos, len(combos[0])), axis=1)  # the sum of the classes (F 2, S/N 1, D 0)
     return [combos[k] for k in np.argsort(-level, kind="stable").tolist()]
-
-
-def _digits(rows: list[str], L: int) -> NDArray[np.int64] | None:
-    """The base-3 digits ``(R, L)`` (F 0, S/N 1, D 2) of ``rows``, read as bytes at once; None
-    when a row is not ``L`` letters F, S, N or D."""
-    if not rows:
-        return np.zeros((0, L), dtype=np.int64)
-    if any(len(c) != L for c in rows):
-        return None
-    try:
-        raw = np.frombuffer("".join(rows).encode("ascii"), dtype=np.uint8).reshape(len(rows), L)
-    except (UnicodeEncodeError, ValueError):
-        return None
-    out = _LETTER_DIGIT[raw]  # (R, L)
-    return None if bool(np.any(out < 0)) else out
 
 
 #: Enumerations larger than this are split over worker processes (when ``workers`` > 1).
@@ -138,9 +122,6 @@ DIMS_CHUNK = 16384
 #: (a flag per combination: 3^15 bytes, 14 MB).
 OPEN_MAX_CONTACTS = 15
 _CODE = {"F": 0, "S": 1, "N": 1, "D": 2}
-_LETTER_DIGIT = np.full(256, -1, dtype=np.int64)  # _CODE by byte, -1 elsewhere
-for _letter, _digit in _CODE.items():
-    _LETTER_DIGIT[ord(_letter)] = _digit
 #: ``symmetric_empty``: the largest residual of a map (relative mismatch of the mapped data) that
 #: carries a proven emptiness (a 1e-9 perturbation of the contact data changes no verdict that is
 #: not degenerate, issue 9).
@@ -560,8 +541,7 @@ class _Enumeration:
         L = self.system.L
         self._pow3 = 3 ** np.arange(L, dtype=np.int64)
         self._open: NDArray[np.bool_] | None = None
-        digits = _digits(self.dafc_rows, L)
-        assert digits is not None  # the rows are letter patterns of the scene's contacts
+        digits = letter_codes(self.dafc_rows, L)  # (R, L)
         if L <= OPEN_MAX_CONTACTS:
             codes = digits @ self._pow3
             self._open = np.zeros(3**L, dtype=bool)
@@ -693,8 +673,7 @@ class _Enumeration:
         if self._open is not None and sources:
             # the images by base-3 codes (contact i's digit moves to perm[i]), all at once; only
             # the undecided ones are looked at, in the same order
-            digits = _digits([c for c, _ in sources], self.system.L)  # (n, L)
-            assert digits is not None  # rows of the table: letters of the scene's contacts
+            digits = letter_codes([c for c, _ in sources], self.system.L)  # (n, L)
             images = np.stack([digits @ self._pow3[g.perm] for g in self.symmetries], axis=1)  # (n, #maps)
             live = self._undecided[images]  # (n, #maps)
             todo = [(k, j) for k, j in zip(*np.nonzero(live), strict=True)]

@@ -8,7 +8,7 @@ import numpy as np
 
 from analysis import memo
 from analysis._types import Array
-from analysis.contacts import GraspSystem, Selection, constrained_matrices
+from analysis.contacts import GraspSystem, Selection, constrained_matrices, letter_codes
 from analysis.linalg import null_space, orth, pinv
 
 #: Rows of ``B = A_d Phi_full`` with a norm at most this are zero (:attr:`MotionSpace.B`): the
@@ -164,8 +164,7 @@ def motion_dims(system: GraspSystem, combinations: list[str]) -> tuple[Array, Ar
         blocks_A[i, 1, 0] = system.normals[i] @ A_i
         blocks_J[i, 0] = system.J_blocks[i]
         blocks_J[i, 1, 0] = system.normals[i] @ system.J_blocks[i]
-    code = {"F": 0, "S": 1, "N": 1, "D": 2}
-    letters = np.array([[code[s] for s in c] for c in combinations], dtype=np.intp).reshape(-1, L)
+    letters = letter_codes(combinations, L)  # (R, L)
     a = n - _ranks(blocks_A, letters)
     null_J = M - _group_ranks(system, blocks_J, letters) if M else np.zeros(len(combinations), dtype=int)
     return a, a - null_J

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from analysis._types import Array
-from analysis.contacts import GraspSystem, Selection, selection
+from analysis.contacts import GraspSystem, Selection, letter_codes, selection
 from analysis.friction import friction_set
 from analysis.scales import REUSE_TOL, snap
 from analysis.statics import statics
@@ -37,27 +37,11 @@ from analysis.torque_limits import LIMIT_TOL
 CLASS = {"F": 2, "S": 1, "N": 1, "D": 0}
 
 
-_CLASS_OF_BYTE = np.full(256, -1, dtype=np.int8)  # CLASS by the letter's byte, -1 elsewhere
-for _letter, _class in CLASS.items():
-    _CLASS_OF_BYTE[ord(_letter)] = _class
-
-
 def classes(combinations: list[str]) -> NDArray[np.int8]:
-    """``(R, L)`` force classes of the combinations (read as bytes at once where they are
-    letters of one length)."""
+    """``(R, L)`` force classes of the combinations (2 minus :func:`letter_codes`)."""
     if not combinations:
         return np.zeros((0, 0), dtype=np.int8)
-    L = len(combinations[0])
-    if all(len(c) == L for c in combinations):
-        try:
-            raw = np.frombuffer("".join(combinations).encode("ascii"), dtype=np.uint8).reshape(-1, L)
-        except UnicodeEncodeError:
-            raw = None
-        if raw is not None:
-            out = _CLASS_OF_BYTE[raw]
-            if not np.any(out < 0):
-                return out
-    return np.array([[CLASS[s] for s in c] for c in combinations], dtype=np.int8)
+    return (2 - letter_codes(combinations, len(combinations[0]))).astype(np.int8)
 
 
 def _masks(cls: NDArray[np.int8]) -> tuple[NDArray[np.int64], NDArray[np.int64]]:

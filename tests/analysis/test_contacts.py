@@ -23,6 +23,7 @@ from analysis.contacts import (
     build_system,
     constrained_matrices,
     grasp_block,
+    letter_codes,
     parse_combination,
     selection,
     tangent_basis,
@@ -421,3 +422,14 @@ def test_all_combinations_count(path: Path) -> None:
     assert len(set(combos)) == len(combos)
     assert set(itertools.chain.from_iterable(combos)) == set("FSD")
     assert all(len(c) == system.L for c in combos)
+
+
+def test_letter_codes_known_answer() -> None:
+    """F 0, S/N 1, D 2 for every letter; a row of another length or with another letter is a
+    ValueError naming it."""
+    np.testing.assert_array_equal(letter_codes(["FSND", "DDFF"], 4), [[0, 1, 1, 2], [2, 2, 0, 0]])
+    assert letter_codes([], 3).shape == (0, 3)
+    with pytest.raises(ValueError, match="'FXDD' has a letter other than"):
+        letter_codes(["FSDD", "FXDD"], 4)  # not a letter of a contact state
+    with pytest.raises(ValueError, match="'FS' has 2 letters, not 3"):
+        letter_codes(["FSD", "FS", "FSDF"], 3)  # the right total length, misaligned rows

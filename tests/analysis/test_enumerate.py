@@ -15,7 +15,7 @@ from scipy.linalg import null_space
 from analysis.combination import CombinationParts, CombinationSummary, summarize, summarize_with_member
 from analysis.contacts import all_combinations
 from analysis.dafc_family import FamilyKinematics, MemberCertificate, members_at
-from analysis.enumerate import _digits, _order, enumerate_combinations
+from analysis.enumerate import _order, enumerate_combinations
 
 
 def _same(a: CombinationSummary, b: CombinationSummary) -> None:
@@ -206,9 +206,3 @@ def test_order_is_strongest_first_and_stable() -> None:
     assert _order(rows) == want
     assert _order(["D", "FS", "SS", "F"]) == ["FS", "SS", "F", "D"]
     assert _order([]) == []
-
-
-def test_digits_known_answer() -> None:
-    np.testing.assert_array_equal(_digits(["FSND", "DDFF"], 4), [[0, 1, 1, 2], [2, 2, 0, 0]])
-    assert _digits(["FXDD"], 4) is None  # not a letter of a contact state
-    assert _digits([], 3).shape == (0, 3)

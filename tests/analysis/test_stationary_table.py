@@ -14,7 +14,7 @@ def test_classes_known_answer() -> None:
     np.testing.assert_array_equal(got, [[2, 1, 1, 0], [0, 0, 2, 2]])
 
 
-def test_classes_of_rows_of_different_lengths_take_the_letter_by_letter_path() -> None:
+def test_classes_are_the_letters_classes() -> None:
     assert classes([]).shape == (0, 0)
     rows = ["FS", "FS"]
     np.testing.assert_array_equal(classes(rows), [[CLASS[s] for s in c] for c in rows])
